@@ -1,0 +1,1 @@
+"""Training-data sources: CC0 material seeds (and, later, procedural materials)."""

@@ -1,0 +1,143 @@
+"""CC0 material seeds (ambientCG, metalness workflow) -> our linear map set.
+
+Read from ``../shared/data/materials/ambientcg/<ID>/`` at training time, never
+shipped. Conversions:
+
+* metalness -> diffuse/specular (KHR_materials_pbrSpecularGlossiness forward
+  model, in linear colour): ``diffuse = colour * (1 - m)``,
+  ``specular = lerp(0.04, colour, m)``.
+* missing normal map -> normals from the displacement map's gradient.
+* a normal map's +Y convention (OpenGL or DirectX) is decided from the sign
+  of its correlation with the displacement-derived normals.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from svbrdf_cli import conventions as cv
+from svbrdf_cli.imageio import read_image
+
+#: Default displacement depth, in surface units per full [0, 1] swing of the
+#: map, for a 2-unit-wide surface (see :func:`normals_from_height`).
+DEFAULT_DEPTH = 0.04
+
+
+def metalness_to_specular(colour, metalness):
+    """Metalness workflow -> (diffuse, specular) linear albedos.
+
+    Args:
+        colour: (..., 3) linear base colour in [0, 1].
+        metalness: (..., 1) metalness in [0, 1].
+
+    Returns:
+        (diffuse, specular), each (..., 3) linear.
+    """
+    diffuse = colour * (1.0 - metalness)
+    specular = cv.DIELECTRIC_F0 + (colour - cv.DIELECTRIC_F0) * metalness
+    return diffuse, specular
+
+
+def normals_from_height(height, depth=DEFAULT_DEPTH, span=2.0 * cv.SURFACE_HALF_SIZE):
+    """Unit normals (+Y up) from a tileable height map.
+
+    Args:
+        height: (H, W) or (H, W, 1) heights in [0, 1].
+        depth: surface-unit height of a full [0, 1] swing.
+        span: surface width the map covers, in surface units.
+
+    Returns:
+        (H, W, 3) float32 unit normals.
+    """
+    h = np.asarray(height, dtype=np.float64).reshape(height.shape[0], height.shape[1]) * depth
+    px = span / h.shape[1]
+    dx = (np.roll(h, -1, 1) - np.roll(h, 1, 1)) / (2 * px)
+    # Row index grows downward, world +Y is up: dh/dy = -dh/drow.
+    dy = -(np.roll(h, -1, 0) - np.roll(h, 1, 0)) / (2 * px)
+    n = np.stack([-dx, -dy, np.ones_like(h)], -1)
+    return cv.normalize(n).astype(np.float32)
+
+
+#: ambientCG's normal.jpg files, measured with :func:`normal_map_y_sign` on
+#: every seed whose displacement has relief, are all DirectX (Y down): used
+#: where the displacement is flat and the sign cannot be measured.
+AMBIENTCG_Y_SIGN = -1
+
+
+def normal_map_y_sign(normals, height, min_corr=0.1):
+    """+1 if a decoded normal map is +Y up (OpenGL), -1 if Y down (DirectX), 0 if unknown.
+
+    Correlates its y component with that of the normals derived from the
+    displacement map (any depth: only the sign matters). Returns 0 when the
+    correlation is weaker than ``min_corr`` (flat displacement, unrelated maps).
+    """
+    ref = normals_from_height(height, depth=1.0)[..., 1].ravel()
+    ny = normals[..., 1].ravel()
+    if ref.std() < 1e-6 or ny.std() < 1e-6:
+        return 0
+    c = np.corrcoef(ny, ref)[0, 1]
+    return 0 if not abs(c) >= min_corr else (1 if c > 0 else -1)
+
+
+def _resize(img, size):
+    import cv2
+
+    if img.shape[0] == size and img.shape[1] == size:
+        return img
+    out = cv2.resize(img, (size, size), interpolation=cv2.INTER_AREA)
+    return out[..., None] if out.ndim == 2 else out
+
+
+def load_ambientcg(folder, size=None, depth=DEFAULT_DEPTH):
+    """Load one ambientCG material as linear maps.
+
+    Args:
+        folder: ``.../ambientcg/<ID>`` holding ``color.jpg`` (sRGB),
+            ``roughness.jpg``, optional ``metalness.jpg``, ``normal.jpg``,
+            ``displacement.jpg``.
+        size: resize to size x size (area filter) when given.
+        depth: displacement depth when normals come from displacement.
+
+    Returns:
+        dict of HWC float32 linear maps (keys of ``MAP_NAMES``) plus
+        ``"normal_source"`` ("map", "map-flipped-y" or "displacement").
+
+    Raises:
+        FileNotFoundError: colour or roughness is missing (7 of the 25 seeds
+            lack colour; they cannot be used as full materials).
+    """
+    def get(name, grey=False):
+        p = os.path.join(folder, name + ".jpg")
+        if not os.path.isfile(p):
+            return None
+        img = read_image(p)
+        img = img[..., :1] if grey else img[..., :3]
+        return _resize(img, size) if size else img
+
+    colour = get("color")
+    rough = get("roughness", grey=True)
+    if colour is None or rough is None:
+        raise FileNotFoundError(f"{folder}: needs color.jpg and roughness.jpg")
+    metal = get("metalness", grey=True)
+    metal = np.zeros_like(rough) if metal is None else metal
+    diffuse, specular = metalness_to_specular(cv.srgb_to_linear(colour), metal)
+    disp = get("displacement", grey=True)
+    nmap = get("normal")
+    if nmap is not None:
+        normal = cv.decode_normals(nmap)
+        sign = normal_map_y_sign(normal, disp) if disp is not None else 0
+        source = "map" if sign else "map, assumed ambientCG convention"
+        if (sign or AMBIENTCG_Y_SIGN) < 0:
+            normal = normal * np.array([1.0, -1.0, 1.0], dtype=np.float32)
+            source += " (flipped y)"
+    elif disp is not None:
+        normal = normals_from_height(disp, depth=depth)
+        source = "displacement"
+    else:
+        normal = np.broadcast_to(np.array(cv.FLAT_NORMAL, np.float32), colour.shape).copy()
+        source = "flat"
+    return {"normal": normal.astype(np.float32), "diffuse": diffuse.astype(np.float32),
+            "roughness": rough.astype(np.float32), "specular": specular.astype(np.float32),
+            "normal_source": source}

@@ -1,0 +1,1 @@
+"""Differentiable rendering and the paper's intermediate targets."""

@@ -1,0 +1,175 @@
+"""The paper's intermediate targets, made by re-rendering ground-truth maps.
+
+Zhou et al., "Single-Image SVBRDF Estimation Using Auxiliary Renderings as
+Intermediate Targets", section III-B and III-D:
+
+* ``I_bf``  (Eq. 4): the flash image rendered with the uniform normal N_u.
+* ``I_hr``  (Eqs. 5-6): mean of K renderings of (N_u, D, R, S) under the
+  lights of :func:`svbrdf_cli.conventions.aux_light_positions`.
+* ``I_hr2`` (Eqs. 7-8): the same with roughness R_1 = 1 everywhere.
+* ``M_h``   (Eq. 10): input minus the image whose NDF values above
+  delta_h = 0.9 are replaced by D-bar (the mean NDF over pixels below delta_h).
+* ``M_b``   (Eq. 11): the image whose NDF values below delta_s = 0.15 are
+  raised to delta_s, minus the input.
+
+Every image is what the networks see: linear radiance clipped to [0, 1] and
+gamma-encoded (:func:`svbrdf_cli.conventions.image_to_encoded`). The masks are
+differences of such images, so they lie in [0, 1] and are exactly 0 wherever
+the NDF was not changed. The K-light means average clipped *linear* renderings
+(the photo one would get with all K lights at 1/K power each, each clipped as
+a sensor would) and encode once.
+
+All functions take a batch of linear maps (NCHW, see
+:mod:`export.render.brdf`) and run on its device.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from export.render.brdf import render
+from svbrdf_cli import conventions as cv
+
+TARGET_NAMES = ("I", "I_bf", "I_hr", "I_hr2", "M_b", "M_h")
+
+
+def flat_normal(like):
+    """N_u as a (1, 3, 1, 1) unit-vector tensor on ``like``'s device."""
+    return torch.tensor(cv.FLAT_NORMAL, device=like.device, dtype=like.dtype).reshape(1, 3, 1, 1)
+
+
+def flash_image(maps, light=cv.FLASH_POSITION, intensity=cv.LIGHT_INTENSITY, normal=None, ndf=None):
+    """The encoded flash image I (Eq. 1), or a variant of it.
+
+    Args:
+        maps: dict of linear maps.
+        light: flash position (3,) or (B, 3); the camera sits at the flash.
+        intensity: flash intensity, float or (B,).
+        normal: replaces ``maps['normal']`` when given.
+        ndf: NDF transform (see :func:`export.render.brdf.brdf`).
+
+    Returns:
+        (B, 3, H, W) encoded image in [0, 1].
+    """
+    n = maps["normal"] if normal is None else normal
+    lin = render(n, maps["diffuse"], maps["roughness"], maps["specular"], light=light, intensity=intensity, ndf=ndf)
+    return cv.image_to_encoded(lin)
+
+
+def auto_exposure(maps, light=cv.FLASH_POSITION, target=cv.AUTO_EXPOSURE_MEAN, iterations=24):
+    """Per-sample flash intensity giving the encoded image a mean of ``target``.
+
+    What a camera's auto exposure does; the Des19 inputs are exposed this way
+    (see :data:`svbrdf_cli.conventions.AUTO_EXPOSURE_MEAN`). Bisection on the
+    log intensity, batched; no gradient.
+
+    Returns:
+        (B,) intensities.
+    """
+    with torch.no_grad():
+        lin = render(maps["normal"], maps["diffuse"], maps["roughness"], maps["specular"], light=light, intensity=1.0)
+        lo = torch.full((lin.shape[0],), -8.0, dtype=lin.dtype, device=lin.device)
+        hi = torch.full_like(lo, 12.0)
+        for _ in range(iterations):
+            mid = (lo + hi) / 2
+            bright = cv.image_to_encoded(lin * mid.exp().reshape(-1, 1, 1, 1)).mean((1, 2, 3)) < target
+            lo = torch.where(bright, mid, lo)
+            hi = torch.where(bright, hi, mid)
+        return ((lo + hi) / 2).exp()
+
+
+def bumpiness_flattened(maps, light=cv.FLASH_POSITION, intensity=cv.LIGHT_INTENSITY):
+    """I_bf (Eq. 4): the flash image with the uniform normal N_u."""
+    return flash_image(maps, light, intensity, normal=flat_normal(maps["diffuse"]))
+
+
+def highlight_removed(maps, camera=cv.FLASH_POSITION, intensity=cv.LIGHT_INTENSITY, high_roughness=False,
+                      count=cv.AUX_LIGHT_COUNT, chunk=25):
+    """I_hr (Eqs. 5-6) or, with ``high_roughness``, I_hr^2 (Eqs. 7-8).
+
+    Args:
+        maps: dict of linear maps (the normal map is ignored: N_u is used).
+        camera: camera position (3,) or (B, 3), shared by all K renderings;
+            the light disc is centred above it.
+        intensity: flash intensity the per-light intensities are scaled from.
+        high_roughness: render with R_1 = 1 everywhere (I_hr^2).
+        count: K, the number of lights.
+        chunk: lights rendered at once (memory vs. speed).
+
+    Returns:
+        (B, 3, H, W) encoded image in [0, 1].
+    """
+    d = maps["diffuse"]
+    n = flat_normal(d)
+    r = torch.full_like(maps["roughness"][:, :1, :1, :1], cv.AUX_HIGH_ROUGHNESS) if high_roughness else maps["roughness"]
+    pos = cv.aux_light_positions(count)
+    # Fixed per-light weights (computed for the default geometry) so the mean
+    # stays about as bright as the flash image; see conventions.
+    power = torch.as_tensor(cv.aux_light_intensities(pos, 1.0), device=d.device, dtype=d.dtype)
+    offsets = torch.as_tensor(pos, device=d.device, dtype=d.dtype) * torch.tensor([1.0, 1.0, 0.0], dtype=d.dtype, device=d.device)
+    cam = torch.as_tensor(camera, device=d.device, dtype=d.dtype).reshape(-1, 1, 3)
+    lights = cam + offsets  # (1 or B, K, 3): a disc at the camera's height, centred above it
+    intensity = torch.as_tensor(intensity, device=d.device, dtype=d.dtype).reshape(-1, 1)
+    total = torch.zeros(1, device=d.device, dtype=d.dtype)
+    b = d.shape[0]
+    for k0 in range(0, count, chunk):
+        k1 = min(count, k0 + chunk)
+        kk = k1 - k0
+        # Fold the light index into the batch: (B * kk, ...) in one render call.
+        light = lights[:, k0:k1].expand(b, kk, 3).reshape(b * kk, 3)
+        power_k = (intensity * power[k0:k1]).expand(b, kk).reshape(b * kk)
+        rep = lambda t: t.repeat_interleave(kk, 0) if t.shape[0] > 1 else t
+        lin = render(n, rep(d), rep(r), rep(maps["specular"]), light=light,
+                     camera=cam.expand(b, 1, 3).repeat_interleave(kk, 0).reshape(b * kk, 3), intensity=power_k)
+        total = total + lin.clamp(0.0, 1.0).reshape(b, kk, *lin.shape[1:]).sum(1)
+    return cv.image_to_encoded(total / count)
+
+
+def _highlight_suppressor(d):
+    """D_h (Eq. 10): NDF values above delta_h replaced by D-bar, per sample."""
+    below = d <= cv.HIGHLIGHT_NDF_THRESHOLD
+    dbar = (d * below).sum((1, 2, 3), keepdim=True) / below.sum((1, 2, 3), keepdim=True).clamp_min(1)
+    return torch.where(below, d, dbar)
+
+
+def _lowlight_suppressor(d):
+    """D_l (Eq. 11): NDF values below delta_s raised to delta_s."""
+    return d.clamp_min(cv.LOWLIGHT_NDF_THRESHOLD)
+
+
+def highlight_mask(maps, light=cv.FLASH_POSITION, intensity=cv.LIGHT_INTENSITY, image=None):
+    """M_h (Eq. 10): input minus the highlight-suppressed image; (B, 3, H, W) in [0, 1]."""
+    image = flash_image(maps, light, intensity) if image is None else image
+    return (image - flash_image(maps, light, intensity, ndf=_highlight_suppressor)).clamp_min(0.0)
+
+
+def bumpiness_mask(maps, light=cv.FLASH_POSITION, intensity=cv.LIGHT_INTENSITY, image=None):
+    """M_b (Eq. 11): the lowlight-suppressed image minus the input; (B, 3, H, W) in [0, 1]."""
+    image = flash_image(maps, light, intensity) if image is None else image
+    return (flash_image(maps, light, intensity, ndf=_lowlight_suppressor) - image).clamp_min(0.0)
+
+
+def intermediate_targets(maps, light=cv.FLASH_POSITION, intensity=cv.LIGHT_INTENSITY, names=TARGET_NAMES):
+    """All targets for a batch: dict of (B, 3, H, W) encoded images/masks.
+
+    Args:
+        maps: dict of linear maps (B, C, H, W).
+        light: flash (and camera) position, (3,) or (B, 3).
+        intensity: flash intensity, float or (B,).
+        names: which of :data:`TARGET_NAMES` to compute.
+    """
+    out = {}
+    image = flash_image(maps, light, intensity)
+    if "I" in names:
+        out["I"] = image
+    if "I_bf" in names:
+        out["I_bf"] = bumpiness_flattened(maps, light, intensity)
+    if "I_hr" in names:
+        out["I_hr"] = highlight_removed(maps, light, intensity)
+    if "I_hr2" in names:
+        out["I_hr2"] = highlight_removed(maps, light, intensity, high_roughness=True)
+    if "M_b" in names:
+        out["M_b"] = bumpiness_mask(maps, light, intensity, image=image)
+    if "M_h" in names:
+        out["M_h"] = highlight_mask(maps, light, intensity, image=image)
+    return out

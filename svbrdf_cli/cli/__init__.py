@@ -1,0 +1,1 @@
+"""The ``svbrdf`` command line: a thin layer over the library (the library never imports click)."""

@@ -1,0 +1,41 @@
+"""The ``svbrdf`` command group: verbosity, version, error reporting, sub-commands."""
+
+import logging
+import sys
+
+import click
+
+from svbrdf_cli import __version__
+from svbrdf_cli.errors import SvbrdfError
+
+
+class SvbrdfGroup(click.Group):
+    """Turns library errors into one-line messages and exit code 1."""
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except SvbrdfError as e:
+            logging.getLogger("svbrdf").debug("details", exc_info=True)
+            raise click.ClickException(str(e)) from e
+
+
+@click.group(cls=SvbrdfGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.option("-v", "--verbose", count=True, help="More log output (repeat for more).")
+@click.option("-q", "--quiet", is_flag=True, help="Only errors.")
+@click.version_option(__version__, prog_name="svbrdf")
+@click.pass_context
+def cli(ctx, verbose, quiet):
+    """Single-image material capture: flash photo in, PBR texture set out."""
+    level = logging.ERROR if quiet else (logging.WARNING, logging.INFO, logging.DEBUG)[min(verbose, 2)]
+    logging.basicConfig(level=level, format="%(levelname)s: %(message)s", stream=sys.stderr)
+    ctx.obj = {"quiet": quiet, "verbose": verbose}
+
+
+def _register():
+    from svbrdf_cli.cli.render import render_cmd
+
+    cli.add_command(render_cmd)
+
+
+_register()

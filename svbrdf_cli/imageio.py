@@ -1,0 +1,93 @@
+"""Reading and writing images through OpenImageIO.
+
+Arrays are HWC float32 in [0, 1] in whatever encoding the file holds; callers
+decide the colour space with :mod:`svbrdf_cli.conventions`. Writes go to a
+temporary file in the target folder and are renamed into place, so a failed
+write never leaves a half-written image behind.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+
+import numpy as np
+
+from svbrdf_cli.errors import ImageReadError, ImageWriteError
+
+_FORMATS = {8: "uint8", 16: "uint16", 32: "float"}
+
+
+def read_image(path):
+    """Read an image file.
+
+    Args:
+        path: file path (anything OpenImageIO reads: PNG, JPEG, TIFF, EXR, ...).
+
+    Returns:
+        (H, W, C) float32 array; integer formats scaled to [0, 1]. Grey images
+        have C = 1.
+
+    Raises:
+        ImageReadError: the file is missing or cannot be decoded.
+    """
+    import OpenImageIO as oiio
+
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise ImageReadError(f"Could not read '{path}': no such file. Check the path.")
+    inp = oiio.ImageInput.open(path)
+    if inp is None:
+        raise ImageReadError(f"Could not read '{path}': {oiio.geterror().strip() or 'unknown format'}. "
+                             "Convert it to PNG, TIFF or EXR.")
+    try:
+        spec = inp.spec()
+        pixels = inp.read_image(0, 0, 0, spec.nchannels, "float")
+    finally:
+        inp.close()
+    if pixels is None:
+        raise ImageReadError(f"Could not decode '{path}': {oiio.geterror().strip()}. The file may be damaged.")
+    pixels = np.asarray(pixels, dtype=np.float32)
+    if pixels.ndim == 2:
+        pixels = pixels[..., None]
+    return pixels
+
+
+def write_image(path, pixels, bits=8):
+    """Write an image atomically.
+
+    Args:
+        path: target file; the extension chooses the format.
+        pixels: (H, W) or (H, W, C) float array in [0, 1] (clipped for
+            integer formats).
+        bits: 8 or 16 for integer formats, 32 for float (EXR/TIFF).
+
+    Raises:
+        ImageWriteError: the image could not be written.
+    """
+    import OpenImageIO as oiio
+
+    path = os.fspath(path)
+    a = np.asarray(pixels, dtype=np.float32)
+    if a.ndim == 2:
+        a = a[..., None]
+    if bits != 32:
+        a = a.clip(0.0, 1.0)
+    h, w, c = a.shape
+    folder = os.path.dirname(os.path.abspath(path))
+    ext = os.path.splitext(path)[1]
+    fd, tmp = tempfile.mkstemp(prefix=".svbrdf-", suffix=ext, dir=folder)
+    os.close(fd)
+    try:
+        out = oiio.ImageOutput.create(tmp)
+        if out is None:
+            raise ImageWriteError(f"Could not write '{path}': no writer for '{ext}'. Use .png, .tif or .exr.")
+        spec = oiio.ImageSpec(w, h, c, _FORMATS[bits])
+        ok = out.open(tmp, spec) and out.write_image(a)
+        out.close()
+        if not ok:
+            raise ImageWriteError(f"Could not write '{path}': {oiio.geterror().strip()}.")
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)

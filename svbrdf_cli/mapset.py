@@ -1,0 +1,75 @@
+"""The native map set on disk: ``normal.png diffuse.png roughness.png specular.png``.
+
+Stored in the Des18 encoding (:mod:`svbrdf_cli.conventions`); in memory as a
+dict of HWC float32 arrays in linear units: ``normal`` (H, W, 3) unit vectors,
+``diffuse`` and ``specular`` (H, W, 3) linear albedo, ``roughness`` (H, W, 1).
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from svbrdf_cli import conventions as cv
+from svbrdf_cli.errors import MapSetError
+from svbrdf_cli.imageio import read_image, write_image
+
+
+def stored_to_linear(stored):
+    """Dict of stored-encoding HWC maps in [0, 1] -> linear maps."""
+    return {
+        "normal": cv.decode_normals(stored["normal"][..., :3]),
+        "diffuse": cv.albedo_to_linear(stored["diffuse"][..., :3]),
+        "roughness": stored["roughness"][..., :1],
+        "specular": cv.albedo_to_linear(stored["specular"][..., :3]),
+    }
+
+
+def linear_to_stored(maps):
+    """Linear maps -> stored-encoding maps in [0, 1] (roughness as grey RGB)."""
+    r = maps["roughness"][..., :1]
+    return {
+        "normal": cv.encode_normals(maps["normal"]),
+        "diffuse": cv.albedo_to_stored(maps["diffuse"]),
+        "roughness": np.repeat(r.clip(0.0, 1.0), 3, axis=-1),
+        "specular": cv.albedo_to_stored(maps["specular"]),
+    }
+
+
+def read_map_set(folder):
+    """Read a native map set.
+
+    Args:
+        folder: directory holding the four PNGs (other image extensions
+            OpenImageIO reads are accepted: ``.tif``, ``.exr``).
+
+    Returns:
+        dict of linear HWC float32 maps.
+
+    Raises:
+        MapSetError: a map is missing, or their sizes differ.
+    """
+    folder = os.fspath(folder)
+    stored = {}
+    for name in cv.MAP_NAMES:
+        path = next((os.path.join(folder, name + ext) for ext in (".png", ".tif", ".tiff", ".exr")
+                     if os.path.isfile(os.path.join(folder, name + ext))), None)
+        if path is None:
+            raise MapSetError(f"'{folder}' has no {name}.png; a map set needs {', '.join(n + '.png' for n in cv.MAP_NAMES)}.")
+        img = read_image(path)
+        if img.shape[-1] == 1 and name != "roughness":
+            img = np.repeat(img, 3, axis=-1)
+        stored[name] = img
+    shapes = {k: v.shape[:2] for k, v in stored.items()}
+    if len(set(shapes.values())) != 1:
+        raise MapSetError(f"Maps in '{folder}' differ in size: "
+                          + ", ".join(f"{k} {w}x{h}" for k, (h, w) in shapes.items()) + ". Resize them to match.")
+    return stored_to_linear(stored)
+
+
+def write_map_set(folder, maps, bits=8):
+    """Write linear maps as a native map set (PNG, Des18 encoding)."""
+    os.makedirs(folder, exist_ok=True)
+    for name, img in linear_to_stored(maps).items():
+        write_image(os.path.join(folder, name + ".png"), img, bits=bits)

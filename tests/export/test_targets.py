@@ -1,0 +1,116 @@
+import pytest
+import torch
+
+from export.render import targets as T
+from svbrdf_cli import conventions as cv
+
+
+def _maps(b=2, h=64, w=64, rough=None, seed=0, bumpy=True):
+    g = torch.Generator().manual_seed(seed)
+    n = torch.zeros(b, 3, h, w, dtype=torch.float64)
+    n[:, 2] = 1
+    if bumpy:
+        yy, xx = torch.meshgrid(torch.linspace(0, 8 * torch.pi, h, dtype=torch.float64),
+                                torch.linspace(0, 8 * torch.pi, w, dtype=torch.float64), indexing="ij")
+        n[:, 0] = 0.6 * torch.sin(xx)
+        n[:, 1] = 0.6 * torch.cos(yy)
+        n = cv.normalize(n, axis=1)
+    r = torch.rand(b, 1, h, w, generator=g, dtype=torch.float64) * 0.3 + 0.1 if rough is None \
+        else torch.full((b, 1, h, w), rough, dtype=torch.float64)
+    return {"normal": n, "diffuse": torch.rand(b, 3, h, w, generator=g, dtype=torch.float64) * 0.5,
+            "roughness": r, "specular": torch.rand(b, 3, h, w, generator=g, dtype=torch.float64) * 0.3 + 0.1}
+
+
+def test_shapes_and_ranges():
+    out = T.intermediate_targets(_maps())
+    assert set(out) == set(T.TARGET_NAMES)
+    for k, v in out.items():
+        assert v.shape == (2, 3, 64, 64), k
+        assert torch.isfinite(v).all() and v.min() >= 0 and v.max() <= 1, k
+
+
+def test_bumpiness_flattened_equals_input_for_flat_normals():
+    maps = _maps(bumpy=False)
+    torch.testing.assert_close(T.bumpiness_flattened(maps), T.flash_image(maps))
+
+
+def test_bumpiness_flattened_differs_for_bumpy_normals():
+    maps = _maps()
+    assert (T.bumpiness_flattened(maps) - T.flash_image(maps)).abs().mean() > 0.01
+
+
+def test_masks_zero_where_nothing_is_suppressed():
+    # r = 1: D = 1/pi everywhere for flat normals, between delta_s and delta_h: nothing changes.
+    maps = _maps(rough=1.0, bumpy=False)
+    assert cv.LOWLIGHT_NDF_THRESHOLD < 1 / torch.pi < cv.HIGHLIGHT_NDF_THRESHOLD
+    assert T.highlight_mask(maps).abs().max() == 0
+    assert T.bumpiness_mask(maps).abs().max() == 0
+
+
+def test_masks_are_zero_exactly_at_untouched_pixels():
+    from export.render.brdf import ndf_ggx, surface_positions
+
+    maps = _maps(rough=0.35)
+    p = surface_positions(64, 64, maps["normal"])
+    l = cv.normalize(torch.tensor(cv.FLASH_POSITION, dtype=torch.float64).view(1, 3, 1, 1) - p, axis=1)
+    d = ndf_ggx((maps["normal"] * l).sum(1, keepdim=True), cv.roughness_to_alpha(maps["roughness"]))
+    mh, mb = T.highlight_mask(maps), T.bumpiness_mask(maps)
+    hi = (d > cv.HIGHLIGHT_NDF_THRESHOLD).expand_as(mh)
+    lo = (d < cv.LOWLIGHT_NDF_THRESHOLD).expand_as(mb)
+    assert hi.any() and lo.any()
+    assert mh[~hi].abs().max() == 0 and mb[~lo].abs().max() == 0
+    assert mh[hi].mean() > 0.01 and mb[lo].mean() > 0.001
+
+
+def test_highlight_removed_has_no_highlight_on_glossy():
+    maps = _maps(rough=0.15, bumpy=False)
+    maps["specular"].fill_(0.5)
+    i_bf, i_hr = T.bumpiness_flattened(maps), T.highlight_removed(maps)
+    # glossy: I_bf has a saturated highlight at the centre, I_hr none
+    assert i_bf.amax() > 0.99 and i_hr.amax() < 0.8 * i_bf.amax()
+    assert i_hr.var() < 0.5 * i_bf.var()
+    centre = i_hr[..., 28:36, 28:36].mean()
+    assert centre < 1.2 * i_hr.mean()
+
+
+def _roughness_of(img):
+    """Mean absolute Laplacian: high-frequency energy."""
+    lap = img[..., 1:-1, 2:] + img[..., 1:-1, :-2] + img[..., 2:, 1:-1] + img[..., :-2, 1:-1] - 4 * img[..., 1:-1, 1:-1]
+    return lap.abs().mean()
+
+
+def test_hr2_is_smoother_than_hr():
+    maps = _maps()
+    maps["roughness"] = torch.where(torch.rand_like(maps["roughness"]) > 0.5, 0.1, 0.6).double()
+    maps["diffuse"].fill_(0.2)
+    maps["specular"].fill_(0.3)
+    hr, hr2 = T.highlight_removed(maps), T.highlight_removed(maps, high_roughness=True)
+    assert _roughness_of(hr2) < 0.5 * _roughness_of(hr)
+
+
+def test_highlight_removed_chunking_does_not_change_result():
+    maps = _maps(b=2, h=16, w=16)
+    torch.testing.assert_close(T.highlight_removed(maps, chunk=7), T.highlight_removed(maps, chunk=100))
+
+
+def test_highlight_removed_per_sample_camera():
+    maps = _maps(b=2, h=16, w=16)
+    cams = torch.tensor([[0.0, 0.0, 2.0], [0.3, -0.2, 1.6]], dtype=torch.float64)
+    both = T.highlight_removed(maps, camera=cams)
+    for i in range(2):
+        one = T.highlight_removed({k: v[i:i + 1] for k, v in maps.items()}, camera=cams[i])
+        torch.testing.assert_close(both[i:i + 1], one)
+
+
+def test_auto_exposure_hits_target():
+    maps = _maps()
+    e = T.auto_exposure(maps, target=0.4)
+    img = T.flash_image(maps, intensity=e)
+    assert torch.allclose(img.mean((1, 2, 3)), torch.full((2,), 0.4, dtype=torch.float64), atol=1e-3)
+
+
+def test_targets_are_differentiable_in_the_maps():
+    maps = {k: v[:1, :, :8, :8].clone().requires_grad_(True) for k, v in _maps().items()}
+    out = T.intermediate_targets(maps)
+    sum(v.sum() for v in out.values()).backward()
+    assert all(torch.isfinite(v.grad).all() for v in maps.values())

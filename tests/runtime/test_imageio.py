@@ -1,0 +1,24 @@
+import numpy as np
+import pytest
+
+from svbrdf_cli.errors import ImageReadError
+from svbrdf_cli.imageio import read_image, write_image
+
+
+@pytest.mark.parametrize("ext,bits,tol", [(".png", 8, 1 / 255), (".png", 16, 1 / 65535), (".exr", 32, 1e-6)])
+def test_round_trip(tmp_path, ext, bits, tol):
+    a = np.random.default_rng(0).uniform(size=(8, 10, 3)).astype(np.float32)
+    p = tmp_path / ("x" + ext)
+    write_image(p, a, bits=bits)
+    b = read_image(p)
+    assert b.shape == a.shape and np.abs(a - b).max() <= tol
+    assert [f.name for f in tmp_path.iterdir()] == ["x" + ext]  # no temporary left behind
+
+
+def test_missing_and_garbage(tmp_path):
+    with pytest.raises(ImageReadError, match="no such file"):
+        read_image(tmp_path / "nope.png")
+    bad = tmp_path / "bad.png"
+    bad.write_bytes(b"not a png")
+    with pytest.raises(ImageReadError, match="bad.png"):
+        read_image(bad)
