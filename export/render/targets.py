@@ -25,9 +25,11 @@ All functions take a batch of linear maps (NCHW, see
 
 from __future__ import annotations
 
+import math
+
 import torch
 
-from export.render.brdf import render
+from export.render.brdf import fresnel_schlick, ndf_ggx, render, surface_positions, visibility_smith_schlick
 from svbrdf_cli import conventions as cv
 
 TARGET_NAMES = ("I", "I_bf", "I_hr", "I_hr2", "M_b", "M_h")
@@ -84,7 +86,7 @@ def bumpiness_flattened(maps, light=cv.FLASH_POSITION, intensity=cv.LIGHT_INTENS
 
 
 def highlight_removed(maps, camera=cv.FLASH_POSITION, intensity=cv.LIGHT_INTENSITY, high_roughness=False,
-                      count=cv.AUX_LIGHT_COUNT, chunk=25):
+                      count=cv.AUX_LIGHT_COUNT, chunk=5):
     """I_hr (Eqs. 5-6) or, with ``high_roughness``, I_hr^2 (Eqs. 7-8).
 
     Args:
@@ -100,8 +102,8 @@ def highlight_removed(maps, camera=cv.FLASH_POSITION, intensity=cv.LIGHT_INTENSI
         (B, 3, H, W) encoded image in [0, 1].
     """
     d = maps["diffuse"]
-    n = flat_normal(d)
-    r = torch.full_like(maps["roughness"][:, :1, :1, :1], cv.AUX_HIGH_ROUGHNESS) if high_roughness else maps["roughness"]
+    # R_1 as a single (1, 1, 1, 1) value: D and G are then computed once per light, not per sample.
+    r = torch.full_like(maps["roughness"][:1, :1, :1, :1], cv.AUX_HIGH_ROUGHNESS) if high_roughness else maps["roughness"]
     pos = cv.aux_light_positions(count)
     # Fixed per-light weights (computed for the default geometry) so the mean
     # stays about as bright as the flash image; see conventions.
@@ -110,19 +112,45 @@ def highlight_removed(maps, camera=cv.FLASH_POSITION, intensity=cv.LIGHT_INTENSI
     cam = torch.as_tensor(camera, device=d.device, dtype=d.dtype).reshape(-1, 1, 3)
     lights = cam + offsets  # (1 or B, K, 3): a disc at the camera's height, centred above it
     intensity = torch.as_tensor(intensity, device=d.device, dtype=d.dtype).reshape(-1, 1)
-    total = torch.zeros(1, device=d.device, dtype=d.dtype)
-    b = d.shape[0]
+    total = 0
     for k0 in range(0, count, chunk):
         k1 = min(count, k0 + chunk)
-        kk = k1 - k0
-        # Fold the light index into the batch: (B * kk, ...) in one render call.
-        light = lights[:, k0:k1].expand(b, kk, 3).reshape(b * kk, 3)
-        power_k = (intensity * power[k0:k1]).expand(b, kk).reshape(b * kk)
-        rep = lambda t: t.repeat_interleave(kk, 0) if t.shape[0] > 1 else t
-        lin = render(n, rep(d), rep(r), rep(maps["specular"]), light=light,
-                     camera=cam.expand(b, 1, 3).repeat_interleave(kk, 0).reshape(b * kk, 3), intensity=power_k)
-        total = total + lin.clamp(0.0, 1.0).reshape(b, kk, *lin.shape[1:]).sum(1)
+        lin = _flat_normal_radiance(d, r, maps["specular"], lights[:, k0:k1], cam[:, 0], intensity * power[k0:k1])
+        total = total + lin.clamp(0.0, 1.0).sum(1)
     return cv.image_to_encoded(total / count)
+
+
+def _flat_normal_radiance(diffuse, roughness, specular, lights, camera, intensity):
+    """Radiance under several lights of a surface with the uniform normal N_u.
+
+    Same model as :func:`export.render.brdf.render` (and tested equal to it),
+    specialised for n = (0, 0, 1): every geometric term is a scalar field that
+    depends on the light and camera only, computed once per light and
+    broadcast over the batch instead of per sample and channel.
+
+    Args:
+        diffuse, specular: (B, 3, H, W) linear; roughness (B or 1, 1, H, W).
+        lights: (Bc, K, 3) positions (Bc = 1 or B).
+        camera: (Bc, 3) positions.
+        intensity: (Bi, K) intensities (Bi = 1 or B).
+
+    Returns:
+        (B, K, 3, H, W) linear radiance, unclipped.
+    """
+    h, w = diffuse.shape[-2:]
+    p = surface_positions(h, w, diffuse).unsqueeze(1)               # (1, 1, 3, H, W)
+    to_light = lights[..., None, None] - p                          # (Bc, K, 3, H, W)
+    dist2 = (to_light * to_light).sum(2, keepdim=True)
+    l = to_light * dist2.rsqrt()
+    v = cv.normalize(camera[:, None, :, None, None] - p, axis=2)   # (Bc, 1, 3, H, W)
+    half = cv.normalize(l + v, axis=2)
+    nl, nv, nh = l[:, :, 2:3], v[:, :, 2:3], half[:, :, 2:3]       # n = (0, 0, 1)
+    vh = (v * half).sum(2, keepdim=True)
+    irradiance = intensity[..., None, None, None] * nl.clamp_min(0.0) * (nl > 0) / dist2
+    alpha = cv.roughness_to_alpha(roughness).unsqueeze(1)           # (B, 1, 1, H, W)
+    spec = ndf_ggx(nh, alpha) * visibility_smith_schlick(nl, nv, alpha) * (0.25 * math.pi)
+    f_spec = fresnel_schlick(vh, specular.unsqueeze(1))             # (B, K, 3, H, W)
+    return irradiance * ((diffuse * (1.0 - specular)).unsqueeze(1) + spec * f_spec)
 
 
 def _highlight_suppressor(d):

@@ -114,3 +114,23 @@ def test_targets_are_differentiable_in_the_maps():
     out = T.intermediate_targets(maps)
     sum(v.sum() for v in out.values()).backward()
     assert all(torch.isfinite(v.grad).all() for v in maps.values())
+
+
+def test_highlight_removed_matches_general_renderer():
+    """The flat-normal fast path equals K calls of the general renderer with N_u."""
+    from export.render.brdf import render
+
+    maps = _maps(b=2, h=12, w=12)
+    cam = torch.tensor([0.2, -0.1, 2.0], dtype=torch.float64)
+    for high in (False, True):
+        r = torch.ones_like(maps["roughness"]) if high else maps["roughness"]
+        pos = cv.aux_light_positions(20)
+        power = cv.aux_light_intensities(pos, 1.5)
+        acc = 0
+        for p, e in zip(pos, power):
+            light = cam + torch.tensor([p[0], p[1], 0.0], dtype=torch.float64)
+            acc = acc + render(T.flat_normal(maps["diffuse"]), maps["diffuse"], r, maps["specular"],
+                               light=light, camera=cam, intensity=float(e)).clamp(0, 1)
+        ref = cv.image_to_encoded(acc / 20)
+        out = T.highlight_removed(maps, camera=cam, intensity=1.5, high_roughness=high, count=20, chunk=6)
+        torch.testing.assert_close(out, ref, rtol=1e-9, atol=1e-9)
