@@ -70,7 +70,7 @@ def main(argv=None):
     ap.add_argument("--materials", default=os.path.join("..", "shared", "data", "materials", "ambientcg"))
     ap.add_argument("--ids", nargs="+", default=["Tiles032", "PavingStones098"])
     ap.add_argument("--size", type=int, default=256)
-    ap.add_argument("--mask-gain", type=float, default=2.0)
+    ap.add_argument("--mask-gain", type=float, default=4.0)
     ap.add_argument("-o", "--output", default=os.path.join("docs", "figures", "intermediates.png"))
     a = ap.parse_args(argv)
     img = figure(a.materials, a.ids, a.size, a.mask_gain)
