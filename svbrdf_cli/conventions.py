@@ -108,6 +108,29 @@ def normalize(v, axis=-1, eps=1e-20):
     return v / ((v * v).sum(axis, keepdims=True) + eps) ** 0.5
 
 
+def decode_maps(stored, axis=-1):
+    """Stored-encoding maps in [0, 1] -> linear maps (the rule for each map, once).
+
+    Args:
+        stored: dict with ``normal`` (xyz*0.5+0.5), ``diffuse`` and
+            ``specular`` (gamma-encoded), ``roughness`` (linear), channels
+            along ``axis`` (roughness one channel).
+        axis: channel axis (-1 for HWC numpy, 1 for NCHW torch).
+    """
+    return {"normal": decode_normals(stored["normal"], axis=axis),
+            "diffuse": albedo_to_linear(stored["diffuse"]),
+            "roughness": stored["roughness"],
+            "specular": albedo_to_linear(stored["specular"])}
+
+
+def encode_maps(maps):
+    """Inverse of :func:`decode_maps`."""
+    return {"normal": encode_normals(maps["normal"]),
+            "diffuse": albedo_to_stored(maps["diffuse"]),
+            "roughness": maps["roughness"],
+            "specular": albedo_to_stored(maps["specular"])}
+
+
 def albedo_to_linear(x):
     """Stored (gamma 2.2) diffuse/specular albedo in [0, 1] -> linear."""
     return x.clip(0.0, 1.0) ** ALBEDO_GAMMA

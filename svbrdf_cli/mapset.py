@@ -12,29 +12,21 @@ import os
 import numpy as np
 
 from svbrdf_cli import conventions as cv
+from svbrdf_cli.conventions import MAP_CHANNELS
 from svbrdf_cli.errors import MapSetError
 from svbrdf_cli.imageio import read_image, write_image
 
 
 def stored_to_linear(stored):
-    """Dict of stored-encoding HWC maps in [0, 1] -> linear maps."""
-    return {
-        "normal": cv.decode_normals(stored["normal"][..., :3]),
-        "diffuse": cv.albedo_to_linear(stored["diffuse"][..., :3]),
-        "roughness": stored["roughness"][..., :1],
-        "specular": cv.albedo_to_linear(stored["specular"][..., :3]),
-    }
+    """Dict of stored-encoding HWC maps as read from disk -> linear maps."""
+    return cv.decode_maps({k: v[..., :MAP_CHANNELS[k]] for k, v in stored.items()})
 
 
 def linear_to_stored(maps):
-    """Linear maps -> stored-encoding maps in [0, 1] (roughness as grey RGB)."""
-    r = maps["roughness"][..., :1]
-    return {
-        "normal": cv.encode_normals(maps["normal"]),
-        "diffuse": cv.albedo_to_stored(maps["diffuse"]),
-        "roughness": np.repeat(r.clip(0.0, 1.0), 3, axis=-1),
-        "specular": cv.albedo_to_stored(maps["specular"]),
-    }
+    """Linear maps -> stored-encoding maps in [0, 1], roughness as grey RGB (Des18 files)."""
+    out = cv.encode_maps(maps)
+    out["roughness"] = np.repeat(out["roughness"][..., :1].clip(0.0, 1.0), 3, axis=-1)
+    return out
 
 
 def read_map_set(folder):

@@ -77,7 +77,7 @@ def brdf(n, l, v, diffuse, roughness, specular, ndf=None):
         (..., 3) BRDF values (1/sr), >= 0.
     """
     h = cv.normalize(l + v)
-    alpha = cv.roughness_to_alpha(np.asarray(roughness, dtype=np.result_type(n, np.float32)))
+    alpha = cv.roughness_to_alpha(np.asarray(roughness))
     d = ndf_ggx(_dot(n, h), alpha)
     if ndf is not None:
         d = ndf(d)

@@ -7,12 +7,14 @@ Des18), Schlick 1994 (Fresnel). Every tensor argument broadcasts: a flat
 normal can be (1, 3, 1, 1), a single light (3,), so averaging many lights over
 a batch costs little more than the per-pixel arithmetic.
 
-Maps, in linear units (decode stored maps with :func:`decode_maps`):
+Maps, in linear units :
 
 * ``normal``: (B, 3, H, W) unit vectors, +Y up.
 * ``diffuse``: (B, 3, H, W) linear albedo in [0, 1].
 * ``roughness``: (B, 1, H, W) in [0, 1] (alpha = r^2).
 * ``specular``: (B, 3, H, W) linear albedo (F0) in [0, 1].
+
+Decode stored maps with ``svbrdf_cli.conventions.decode_maps(stored, axis=1)``.
 """
 
 from __future__ import annotations
@@ -121,28 +123,3 @@ def render(normal, diffuse, roughness, specular, light=cv.FLASH_POSITION, camera
 def render_maps(maps, **kwargs):
     """:func:`render` for a dict of linear maps (keys of ``MAP_NAMES``)."""
     return render(maps["normal"], maps["diffuse"], maps["roughness"], maps["specular"], **kwargs)
-
-
-def decode_maps(stored):
-    """Stored-encoding maps in [0, 1] (NCHW) -> linear maps for rendering.
-
-    Args:
-        stored: dict with ``normal`` (B,3,H,W) xyz*0.5+0.5, ``diffuse`` and
-            ``specular`` (B,3,H,W) gamma-encoded, ``roughness`` (B,1,H,W).
-    """
-    return {
-        "normal": cv.decode_normals(stored["normal"], axis=1),
-        "diffuse": cv.albedo_to_linear(stored["diffuse"]),
-        "roughness": stored["roughness"],
-        "specular": cv.albedo_to_linear(stored["specular"]),
-    }
-
-
-def encode_maps(maps):
-    """Inverse of :func:`decode_maps`."""
-    return {
-        "normal": cv.encode_normals(maps["normal"]),
-        "diffuse": cv.albedo_to_stored(maps["diffuse"]),
-        "roughness": maps["roughness"],
-        "specular": cv.albedo_to_stored(maps["specular"]),
-    }

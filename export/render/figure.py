@@ -17,7 +17,6 @@ import numpy as np
 import torch
 
 from export.data.cc0 import load_ambientcg
-from export.render.brdf import encode_maps
 from export.render.targets import auto_exposure, intermediate_targets
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.imageio import write_image
@@ -55,7 +54,7 @@ def figure(materials, ids, size=256, mask_gain=2.0, with_maps=True):
                 img = (img * mask_gain).clip(0, 1)
             tiles.append(_label(img, LABELS[k] + (f" x{mask_gain:g}" if k.startswith("M_") else "")))
         if with_maps:
-            enc = encode_maps(to_nchw(maps))
+            enc = cv.encode_maps(to_nchw(maps))
             for k in cv.MAP_NAMES:
                 img = enc[k][0].permute(1, 2, 0).numpy()
                 img = np.repeat(img, 3, -1) if img.shape[-1] == 1 else img

@@ -29,7 +29,8 @@ import math
 
 import torch
 
-from export.render.brdf import fresnel_schlick, ndf_ggx, render, surface_positions, visibility_smith_schlick
+from export.render.brdf import (fresnel_schlick, ndf_ggx, render, render_maps, surface_positions,
+                                visibility_smith_schlick)
 from svbrdf_cli import conventions as cv
 
 TARGET_NAMES = ("I", "I_bf", "I_hr", "I_hr2", "M_b", "M_h")
@@ -69,7 +70,7 @@ def auto_exposure(maps, light=cv.FLASH_POSITION, target=cv.AUTO_EXPOSURE_MEAN, i
         (B,) intensities.
     """
     with torch.no_grad():
-        lin = render(maps["normal"], maps["diffuse"], maps["roughness"], maps["specular"], light=light, intensity=1.0)
+        lin = render_maps(maps, light=light, intensity=1.0)
         lo = torch.full((lin.shape[0],), -8.0, dtype=lin.dtype, device=lin.device)
         hi = torch.full_like(lo, 12.0)
         for _ in range(iterations):
