@@ -18,6 +18,12 @@ from svbrdf_cli.errors import ImageReadError, ImageWriteError
 _FORMATS = {8: "uint8", 16: "uint16", 32: "float"}
 
 
+def _umask():
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 def read_image(path):
     """Read an image file.
 
@@ -87,6 +93,8 @@ def write_image(path, pixels, bits=8):
         out.close()
         if not ok:
             raise ImageWriteError(f"Could not write '{path}': {oiio.geterror().strip()}.")
+        # mkstemp creates 0600 files; give the result the mode a plain open() would.
+        os.chmod(tmp, 0o666 & ~_umask())
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):

@@ -22,3 +22,16 @@ def test_missing_and_garbage(tmp_path):
     bad.write_bytes(b"not a png")
     with pytest.raises(ImageReadError, match="bad.png"):
         read_image(bad)
+
+
+def test_written_file_has_umask_mode(tmp_path):
+    import os
+    import stat
+
+    old = os.umask(0o022)
+    try:
+        p = tmp_path / "m.png"
+        write_image(p, np.zeros((2, 2, 3)))
+        assert stat.S_IMODE(p.stat().st_mode) == 0o644
+    finally:
+        os.umask(old)
