@@ -181,10 +181,18 @@ def linear_to_srgb(x):
 #: x = -1: +Y up in world space and in the normal map agree.
 SURFACE_HALF_SIZE = 1.0
 
+
+def camera_height(tan_half_fov):
+    """Height above the surface at which a square image sees exactly the
+    [-1, 1]^2 surface, for a field of view with ``tan(fov / 2) = tan_half_fov``
+    (array-agnostic)."""
+    return SURFACE_HALF_SIZE / tan_half_fov
+
+
 #: Camera (and, for a flash photo, the co-located light) height above the
 #: surface centre. 1 / tan(22.5 deg) = 2.414: a 45 degree field of view sees
 #: exactly the [-1, 1]^2 square.
-CAMERA_HEIGHT = 1.0 / math.tan(math.radians(22.5))
+CAMERA_HEIGHT = camera_height(math.tan(math.radians(22.5)))
 
 #: Default camera / flash position.
 FLASH_POSITION = (0.0, 0.0, CAMERA_HEIGHT)
@@ -267,11 +275,14 @@ def aux_light_intensities(positions, intensity=LIGHT_INTENSITY, height=CAMERA_HE
     I * z / d^3; scaling by (d / height)^3 keeps the average image about as
     bright as the flash photo instead of darkening with far lights.
 
+    Array-agnostic (numpy or torch): ``positions`` (..., K, 3) relative to
+    the point below the camera, ``height`` broadcastable to (..., K).
+
     Args:
-        positions: (K, 3) light positions.
+        positions: (..., K, 3) light positions.
 
     Returns:
-        (K,) float64 intensities.
+        (..., K) intensities.
     """
-    d = np.sqrt((np.asarray(positions, dtype=np.float64) ** 2).sum(-1))
-    return intensity * (d / height) ** 3 * (height / np.asarray(positions)[:, 2])
+    d = ((positions * positions).sum(-1)) ** 0.5
+    return intensity * (d / height) ** 3 * (height / positions[..., 2])

@@ -117,6 +117,8 @@ def load_ambientcg(folder, size=None, depth=DEFAULT_DEPTH):
         return _resize(img, size) if size else img
 
     colour = get("color")
+    if colour is not None and colour.shape[-1] == 1:  # greyscale JPEG
+        colour = np.repeat(colour, 3, -1)
     rough = get("roughness", grey=True)
     if colour is None or rough is None:
         raise FileNotFoundError(f"{folder}: needs color.jpg and roughness.jpg")
@@ -141,3 +143,72 @@ def load_ambientcg(folder, size=None, depth=DEFAULT_DEPTH):
     return {"normal": normal.astype(np.float32), "diffuse": diffuse.astype(np.float32),
             "roughness": rough.astype(np.float32), "specular": specular.astype(np.float32),
             "normal_source": source}
+
+
+#: The +Y convention assumed for PlayCanvas normal maps without a height map:
+#: the one with a height map (seaside-rocks01) measures as DirectX (Y down).
+PLAYCANVAS_Y_SIGN = -1
+
+
+def load_playcanvas(folder, size=None, depth=DEFAULT_DEPTH):
+    """Load one PlayCanvas material (``<name>-color``, ``-normal``, ``-roughness``,
+    optional ``-height``; .png or .jpg; dielectric) as linear maps, like
+    :func:`load_ambientcg`."""
+    name = os.path.basename(os.path.normpath(folder))
+
+    def get(kind, grey=False):
+        for ext in (".png", ".jpg"):
+            p = os.path.join(folder, f"{name}-{kind}{ext}")
+            if os.path.isfile(p):
+                img = read_image(p)
+                img = img[..., :1] if grey else img[..., :3]
+                return _resize(img, size) if size else img
+        return None
+
+    colour, rough, nmap, height = get("color"), get("roughness", True), get("normal"), get("height", True)
+    if colour is None or rough is None or nmap is None:
+        raise FileNotFoundError(f"{folder}: needs {name}-color, -roughness and -normal")
+    normal = cv.decode_normals(nmap)
+    sign = normal_map_y_sign(normal, height) if height is not None else 0
+    source = "map" if sign else "map, assumed PlayCanvas convention"
+    if (sign or PLAYCANVAS_Y_SIGN) < 0:
+        normal = normal * np.array([1.0, -1.0, 1.0], dtype=np.float32)
+        source += " (flipped y)"
+    diffuse, specular = metalness_to_specular(cv.srgb_to_linear(colour), np.zeros_like(rough))
+    return {"normal": normal.astype(np.float32), "diffuse": diffuse.astype(np.float32),
+            "roughness": rough.astype(np.float32), "specular": specular.astype(np.float32),
+            "normal_source": source}
+
+
+def seed_folders(root):
+    """(loader, folder) for every seed material under ``<root>/materials``
+    (ambientCG and PlayCanvas), sorted; empty when the folder is absent."""
+    out = []
+    for sub, loader in (("ambientcg", load_ambientcg), ("playcanvas", load_playcanvas)):
+        base = os.path.join(root, "materials", sub)
+        if os.path.isdir(base):
+            out += [(loader, os.path.join(base, d)) for d in sorted(os.listdir(base))
+                    if os.path.isdir(os.path.join(base, d))]
+    return out
+
+
+def load_seeds(root, size=512):
+    """Every usable seed material under ``<root>/materials`` at ``size``².
+
+    Returns:
+        (names, maps): names of the loaded folders and a dict of
+        (N, C, size, size) float32 numpy arrays in NCHW (materials without
+        colour or roughness are skipped).
+    """
+    names, stacks = [], {k: [] for k in cv.MAP_NAMES}
+    for loader, folder in seed_folders(root):
+        try:
+            m = loader(folder, size=size)
+        except FileNotFoundError:
+            continue
+        names.append(os.path.basename(folder))
+        for k in cv.MAP_NAMES:
+            stacks[k].append(np.moveaxis(m[k], -1, 0))
+    if not names:
+        return [], {}
+    return names, {k: np.stack(v) for k, v in stacks.items()}

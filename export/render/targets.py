@@ -41,49 +41,55 @@ def flat_normal(like):
     return torch.tensor(cv.FLAT_NORMAL, device=like.device, dtype=like.dtype).reshape(1, 3, 1, 1)
 
 
-def flash_image(maps, light=cv.FLASH_POSITION, intensity=cv.LIGHT_INTENSITY, normal=None, ndf=None):
+def flash_image(maps, light=cv.FLASH_POSITION, intensity=cv.LIGHT_INTENSITY, normal=None, ndf=None, camera=None):
     """The encoded flash image I (Eq. 1), or a variant of it.
 
     Args:
         maps: dict of linear maps.
-        light: flash position (3,) or (B, 3); the camera sits at the flash.
+        light: flash position (3,) or (B, 3).
         intensity: flash intensity, float or (B,).
         normal: replaces ``maps['normal']`` when given.
         ndf: NDF transform (see :func:`export.render.brdf.brdf`).
+        camera: camera position (3,) or (B, 3); ``None``: at the flash.
 
     Returns:
         (B, 3, H, W) encoded image in [0, 1].
     """
     n = maps["normal"] if normal is None else normal
-    lin = render(n, maps["diffuse"], maps["roughness"], maps["specular"], light=light, intensity=intensity, ndf=ndf)
+    lin = render(n, maps["diffuse"], maps["roughness"], maps["specular"], light=light, camera=camera,
+                 intensity=intensity, ndf=ndf)
     return cv.image_to_encoded(lin)
 
 
-def auto_exposure(maps, light=cv.FLASH_POSITION, target=cv.AUTO_EXPOSURE_MEAN, iterations=24):
+def auto_exposure(maps, light=cv.FLASH_POSITION, target=cv.AUTO_EXPOSURE_MEAN, iterations=24, camera=None):
     """Per-sample flash intensity giving the encoded image a mean of ``target``.
 
     What a camera's auto exposure does; the Des19 inputs are exposed this way
     (see :data:`svbrdf_cli.conventions.AUTO_EXPOSURE_MEAN`). Bisection on the
     log intensity, batched; no gradient.
 
+    Args:
+        target: mean encoded brightness, float or (B,).
+
     Returns:
         (B,) intensities.
     """
     with torch.no_grad():
-        lin = render_maps(maps, light=light, intensity=1.0)
+        lin = render_maps(maps, light=light, camera=camera, intensity=1.0)
         lo = torch.full((lin.shape[0],), -8.0, dtype=lin.dtype, device=lin.device)
         hi = torch.full_like(lo, 12.0)
+        target_t = torch.as_tensor(target, dtype=lin.dtype, device=lin.device)  # float or (B,)
         for _ in range(iterations):
             mid = (lo + hi) / 2
-            bright = cv.image_to_encoded(lin * mid.exp().reshape(-1, 1, 1, 1)).mean((1, 2, 3)) < target
+            bright = cv.image_to_encoded(lin * mid.exp().reshape(-1, 1, 1, 1)).mean((1, 2, 3)) < target_t
             lo = torch.where(bright, mid, lo)
             hi = torch.where(bright, hi, mid)
         return ((lo + hi) / 2).exp()
 
 
-def bumpiness_flattened(maps, light=cv.FLASH_POSITION, intensity=cv.LIGHT_INTENSITY):
+def bumpiness_flattened(maps, light=cv.FLASH_POSITION, intensity=cv.LIGHT_INTENSITY, camera=None):
     """I_bf (Eq. 4): the flash image with the uniform normal N_u."""
-    return flash_image(maps, light, intensity, normal=flat_normal(maps["diffuse"]))
+    return flash_image(maps, light, intensity, normal=flat_normal(maps["diffuse"]), camera=camera)
 
 
 def highlight_removed(maps, camera=cv.FLASH_POSITION, intensity=cv.LIGHT_INTENSITY, high_roughness=False,
@@ -93,7 +99,8 @@ def highlight_removed(maps, camera=cv.FLASH_POSITION, intensity=cv.LIGHT_INTENSI
     Args:
         maps: dict of linear maps (the normal map is ignored: N_u is used).
         camera: camera position (3,) or (B, 3), shared by all K renderings;
-            the light disc is centred above it.
+            the light disc is centred on it, at its height, and the
+            per-light intensities follow its height.
         intensity: flash intensity the per-light intensities are scaled from.
         high_roughness: render with R_1 = 1 everywhere (I_hr^2).
         count: K, the number of lights.
@@ -105,18 +112,16 @@ def highlight_removed(maps, camera=cv.FLASH_POSITION, intensity=cv.LIGHT_INTENSI
     d = maps["diffuse"]
     # R_1 as a single (1, 1, 1, 1) value: D and G are then computed once per light, not per sample.
     r = torch.full_like(maps["roughness"][:1, :1, :1, :1], cv.AUX_HIGH_ROUGHNESS) if high_roughness else maps["roughness"]
-    pos = cv.aux_light_positions(count)
-    # Fixed per-light weights (computed for the default geometry) so the mean
-    # stays about as bright as the flash image; see conventions.
-    power = torch.as_tensor(cv.aux_light_intensities(pos, 1.0), device=d.device, dtype=d.dtype)
-    offsets = torch.as_tensor(pos, device=d.device, dtype=d.dtype) * torch.tensor([1.0, 1.0, 0.0], dtype=d.dtype, device=d.device)
     cam = torch.as_tensor(camera, device=d.device, dtype=d.dtype).reshape(-1, 1, 3)
-    lights = cam + offsets  # (1 or B, K, 3): a disc at the camera's height, centred above it
-    intensity = torch.as_tensor(intensity, device=d.device, dtype=d.dtype).reshape(-1, 1)
+    disc = torch.as_tensor(cv.aux_light_positions(count, height=0.0), device=d.device, dtype=d.dtype)
+    lights = cam + disc  # (1 or B, K, 3): a disc at the camera's height, centred on it
+    # Per-light weights so the mean stays about as bright as the flash image; see conventions.
+    power = cv.aux_light_intensities(lights - cam * cam.new_tensor([1.0, 1.0, 0.0]), 1.0, height=cam[..., 2])
+    intensity = torch.as_tensor(intensity, device=d.device, dtype=d.dtype).reshape(-1, 1) * power  # (B or 1, K)
     total = 0
     for k0 in range(0, count, chunk):
         k1 = min(count, k0 + chunk)
-        lin = _flat_normal_radiance(d, r, maps["specular"], lights[:, k0:k1], cam[:, 0], intensity * power[k0:k1])
+        lin = _flat_normal_radiance(d, r, maps["specular"], lights[:, k0:k1], cam[:, 0], intensity[:, k0:k1])
         total = total + lin.clamp(0.0, 1.0).sum(1)
     return cv.image_to_encoded(total / count)
 
@@ -166,39 +171,43 @@ def _lowlight_suppressor(d):
     return d.clamp_min(cv.LOWLIGHT_NDF_THRESHOLD)
 
 
-def highlight_mask(maps, light=cv.FLASH_POSITION, intensity=cv.LIGHT_INTENSITY, image=None):
+def highlight_mask(maps, light=cv.FLASH_POSITION, intensity=cv.LIGHT_INTENSITY, image=None, camera=None):
     """M_h (Eq. 10): input minus the highlight-suppressed image; (B, 3, H, W) in [0, 1]."""
-    image = flash_image(maps, light, intensity) if image is None else image
-    return (image - flash_image(maps, light, intensity, ndf=_highlight_suppressor)).clamp_min(0.0)
+    image = flash_image(maps, light, intensity, camera=camera) if image is None else image
+    return (image - flash_image(maps, light, intensity, ndf=_highlight_suppressor, camera=camera)).clamp_min(0.0)
 
 
-def bumpiness_mask(maps, light=cv.FLASH_POSITION, intensity=cv.LIGHT_INTENSITY, image=None):
+def bumpiness_mask(maps, light=cv.FLASH_POSITION, intensity=cv.LIGHT_INTENSITY, image=None, camera=None):
     """M_b (Eq. 11): the lowlight-suppressed image minus the input; (B, 3, H, W) in [0, 1]."""
-    image = flash_image(maps, light, intensity) if image is None else image
-    return (flash_image(maps, light, intensity, ndf=_lowlight_suppressor) - image).clamp_min(0.0)
+    image = flash_image(maps, light, intensity, camera=camera) if image is None else image
+    return (flash_image(maps, light, intensity, ndf=_lowlight_suppressor, camera=camera) - image).clamp_min(0.0)
 
 
-def intermediate_targets(maps, light=cv.FLASH_POSITION, intensity=cv.LIGHT_INTENSITY, names=TARGET_NAMES):
+def intermediate_targets(maps, light=cv.FLASH_POSITION, intensity=cv.LIGHT_INTENSITY, names=TARGET_NAMES,
+                         camera=None):
     """All targets for a batch: dict of (B, 3, H, W) encoded images/masks.
 
     Args:
         maps: dict of linear maps (B, C, H, W).
-        light: flash (and camera) position, (3,) or (B, 3).
+        light: flash position, (3,) or (B, 3).
         intensity: flash intensity, float or (B,).
         names: which of :data:`TARGET_NAMES` to compute.
+        camera: camera position, (3,) or (B, 3); ``None``: at the flash.
+            I_hr and I_hr^2 centre their light disc on it.
     """
     out = {}
-    image = flash_image(maps, light, intensity)
+    cam = light if camera is None else camera
+    image = flash_image(maps, light, intensity, camera=camera)
     if "I" in names:
         out["I"] = image
     if "I_bf" in names:
-        out["I_bf"] = bumpiness_flattened(maps, light, intensity)
+        out["I_bf"] = bumpiness_flattened(maps, light, intensity, camera=camera)
     if "I_hr" in names:
-        out["I_hr"] = highlight_removed(maps, light, intensity)
+        out["I_hr"] = highlight_removed(maps, cam, intensity)
     if "I_hr2" in names:
-        out["I_hr2"] = highlight_removed(maps, light, intensity, high_roughness=True)
+        out["I_hr2"] = highlight_removed(maps, cam, intensity, high_roughness=True)
     if "M_b" in names:
-        out["M_b"] = bumpiness_mask(maps, light, intensity, image=image)
+        out["M_b"] = bumpiness_mask(maps, light, intensity, image=image, camera=camera)
     if "M_h" in names:
-        out["M_h"] = highlight_mask(maps, light, intensity, image=image)
+        out["M_h"] = highlight_mask(maps, light, intensity, image=image, camera=camera)
     return out

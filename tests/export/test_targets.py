@@ -124,8 +124,8 @@ def test_highlight_removed_matches_general_renderer():
     cam = torch.tensor([0.2, -0.1, 2.0], dtype=torch.float64)
     for high in (False, True):
         r = torch.ones_like(maps["roughness"]) if high else maps["roughness"]
-        pos = cv.aux_light_positions(20)
-        power = cv.aux_light_intensities(pos, 1.5)
+        pos = cv.aux_light_positions(20, height=2.0)  # disc at the camera's height
+        power = cv.aux_light_intensities(pos, 1.5, height=2.0)
         acc = 0
         for p, e in zip(pos, power):
             light = cam + torch.tensor([p[0], p[1], 0.0], dtype=torch.float64)
