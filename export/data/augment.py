@@ -125,8 +125,8 @@ def hsv_to_rgb(h, s, v):
     return v - v * s * torch.clamp(torch.minimum(t, 4 - t), 0, 1)
 
 
-def jitter_colour(maps, g, hue=0.05, saturation=0.2, brightness=0.3):
-    """Hue shift (fraction of a turn), saturation and brightness scaling of the
+def jitter_colour(maps, g, hue=0.05, saturation=(0.8, 1.5), brightness=0.3):
+    """Hue shift (fraction of a turn), saturation (factor range) and brightness scaling of the
     diffuse albedo, and of the specular albedo where it is coloured (metals),
     kept within physical bounds: diffuse <= :data:`MAX_ALBEDO`, specular in
     [0, 1], dielectric (grey) specular untouched."""
@@ -138,7 +138,7 @@ def jitter_colour(maps, g, hue=0.05, saturation=0.2, brightness=0.3):
         return (lo + torch.rand(b, generator=g, device=dev) * (hi - lo)).to(d).reshape(-1, 1, 1, 1)
 
     dh = draw(-hue, hue)
-    ds = draw(1 - saturation, 1 + saturation)
+    ds = draw(*saturation)
     dv = draw(1 - brightness, 1 + brightness)
 
     def jitter(x, v_max):

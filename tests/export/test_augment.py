@@ -123,7 +123,7 @@ def test_colour_jitter_stays_physical():
     m = {"normal": torch.tensor([0.0, 0, 1]).reshape(1, 3, 1, 1).expand(8, 3, 16, 16), "diffuse": d,
          "roughness": torch.rand(8, 1, 16, 16, generator=g), "specular": spec}
     for _ in range(5):
-        out = A.jitter_colour(m, g, hue=0.1, saturation=0.5, brightness=0.8)
+        out = A.jitter_colour(m, g, hue=0.1, saturation=(0.5, 2.0), brightness=0.8)
         assert out["diffuse"].min() >= 0 and out["diffuse"].max() <= A.MAX_ALBEDO + 1e-6
         assert out["specular"].min() >= 0 and out["specular"].max() <= 1
         assert torch.equal(out["specular"][4:], spec[4:])  # grey dielectric F0 untouched

@@ -126,3 +126,13 @@ def test_off_axis_flash_moves_the_highlight():
     img = S.photograph(maps, cap)["photo"][0].mean(0)
     col = int(img.max(0)[0].argmax())
     assert 40 < col < 56  # mirror point below the lens, x = 0.5 -> column 48
+
+
+def test_blur_keeps_constants_and_softens_edges():
+    img = torch.zeros(2, 3, 32, 32)
+    img[..., 16:] = 1
+    out = S.gaussian_blur(img, torch.tensor([0.0, 1.0], dtype=torch.float64))
+    assert torch.equal(out[0], img[0])
+    assert 0.2 < float(out[1, 0, 5, 15]) < 0.5 and 0.5 < float(out[1, 0, 5, 16]) < 0.8
+    flat = S.gaussian_blur(torch.full((1, 3, 16, 16), 0.3), torch.tensor([2.0]))
+    assert torch.allclose(flat, torch.full_like(flat, 0.3), atol=1e-6)
