@@ -109,54 +109,76 @@ def highlight_removed(maps, camera=cv.FLASH_POSITION, intensity=cv.LIGHT_INTENSI
     Returns:
         (B, 3, H, W) encoded image in [0, 1].
     """
+    return _highlight_removed(maps, camera, intensity, (high_roughness,), count, chunk)[0]
+
+
+def highlight_removed_pair(maps, camera=cv.FLASH_POSITION, intensity=cv.LIGHT_INTENSITY,
+                           count=cv.AUX_LIGHT_COUNT, chunk=5):
+    """(I_hr, I_hr^2) together: the light geometry is computed once for both."""
+    return _highlight_removed(maps, camera, intensity, (False, True), count, chunk)
+
+
+def _highlight_removed(maps, camera, intensity, high_roughness, count, chunk):
     d = maps["diffuse"]
     # R_1 as a single (1, 1, 1, 1) value: D and G are then computed once per light, not per sample.
-    r = torch.full_like(maps["roughness"][:1, :1, :1, :1], cv.AUX_HIGH_ROUGHNESS) if high_roughness else maps["roughness"]
+    one = torch.full_like(maps["roughness"][:1, :1, :1, :1], cv.AUX_HIGH_ROUGHNESS)
+    alphas = [cv.roughness_to_alpha(one if high else maps["roughness"]).unsqueeze(1) for high in high_roughness]
     cam = torch.as_tensor(camera, device=d.device, dtype=d.dtype).reshape(-1, 1, 3)
     disc = torch.as_tensor(cv.aux_light_positions(count, height=0.0), device=d.device, dtype=d.dtype)
     lights = cam + disc  # (1 or B, K, 3): a disc at the camera's height, centred on it
     # Per-light weights so the mean stays about as bright as the flash image; see conventions.
     power = cv.aux_light_intensities(lights - cam * cam.new_tensor([1.0, 1.0, 0.0]), 1.0, height=cam[..., 2])
     intensity = torch.as_tensor(intensity, device=d.device, dtype=d.dtype).reshape(-1, 1) * power  # (B or 1, K)
-    total = 0
+    dd = (d * (1.0 - maps["specular"])).unsqueeze(1)                # (B, 1, 3, H, W)
+    spec = maps["specular"].unsqueeze(1)
+    totals = [0] * len(alphas)
     for k0 in range(0, count, chunk):
         k1 = min(count, k0 + chunk)
-        lin = _flat_normal_radiance(d, r, maps["specular"], lights[:, k0:k1], cam[:, 0], intensity[:, k0:k1])
-        total = total + lin.clamp(0.0, 1.0).sum(1)
-    return cv.image_to_encoded(total / count)
+        geo = _flat_normal_geometry(d, lights[:, k0:k1], cam[:, 0], intensity[:, k0:k1])
+        for i, alpha in enumerate(alphas):
+            totals[i] = totals[i] + _flat_normal_shading(geo, dd, alpha, spec).clamp(0.0, 1.0).sum(1)
+    return [cv.image_to_encoded(t / count) for t in totals]
 
 
-def _flat_normal_radiance(diffuse, roughness, specular, lights, camera, intensity):
-    """Radiance under several lights of a surface with the uniform normal N_u.
+def _flat_normal_geometry(like, lights, camera, intensity):
+    """Light/view terms of a surface with the uniform normal N_u = (0, 0, 1).
 
-    Same model as :func:`export.render.brdf.render` (and tested equal to it),
-    specialised for n = (0, 0, 1): every geometric term is a scalar field that
-    depends on the light and camera only, computed once per light and
-    broadcast over the batch instead of per sample and channel.
+    Every geometric term is then a scalar field that depends on the light
+    and camera only: computed once per light (and per sample only when the
+    camera is) and shared by every map and roughness shaded with it.
 
     Args:
-        diffuse, specular: (B, 3, H, W) linear; roughness (B or 1, 1, H, W).
+        like: a (B, C, H, W) map giving size, device and dtype.
         lights: (Bc, K, 3) positions (Bc = 1 or B).
         camera: (Bc, 3) positions.
         intensity: (Bi, K) intensities (Bi = 1 or B).
 
     Returns:
-        (B, K, 3, H, W) linear radiance, unclipped.
+        dict of (Bc or Bi, K, 1, H, W) fields: ``irradiance``, ``nl``, ``nv``, ``nh``, ``vh``.
     """
-    h, w = diffuse.shape[-2:]
-    p = surface_positions(h, w, diffuse).unsqueeze(1)               # (1, 1, 3, H, W)
+    h, w = like.shape[-2:]
+    p = surface_positions(h, w, like).unsqueeze(1)                  # (1, 1, 3, H, W)
     to_light = lights[..., None, None] - p                          # (Bc, K, 3, H, W)
     dist2 = (to_light * to_light).sum(2, keepdim=True)
     l = to_light * dist2.rsqrt()
     v = cv.normalize(camera[:, None, :, None, None] - p, axis=2)   # (Bc, 1, 3, H, W)
     half = cv.normalize(l + v, axis=2)
-    nl, nv, nh = l[:, :, 2:3], v[:, :, 2:3], half[:, :, 2:3]       # n = (0, 0, 1)
-    vh = (v * half).sum(2, keepdim=True)
-    irradiance = intensity[..., None, None, None] * nl.clamp_min(0.0) * (nl > 0) / dist2
-    alpha = cv.roughness_to_alpha(roughness).unsqueeze(1)           # (B, 1, 1, H, W)
-    spec = ndf_ggx(nh, alpha) * visibility_smith_schlick(nl, nv, alpha) * (0.25 * math.pi)
-    f_spec = fresnel_schlick(vh, specular.unsqueeze(1))             # (B, K, 3, H, W)
-    return irradiance * ((diffuse * (1.0 - specular)).unsqueeze(1) + spec * f_spec)
+    nl = l[:, :, 2:3]
+    return {"irradiance": intensity[..., None, None, None] * nl.clamp_min(0.0) * (nl > 0) / dist2,
+            "nl": nl, "nv": v[:, :, 2:3], "nh": half[:, :, 2:3], "vh": (v * half).sum(2, keepdim=True)}
+
+
+def _flat_normal_shading(geo, diffuse_term, alpha, specular):
+    """Linear radiance (B, K, 3, H, W), unclipped, from :func:`_flat_normal_geometry`'s
+    fields; same model as :func:`export.render.brdf.render` (tested equal to it).
+
+    Args:
+        diffuse_term: (B, 1, 3, H, W) ``diffuse * (1 - specular)``.
+        alpha: (B or 1, 1, 1, H or 1, W or 1) GGX alpha.
+        specular: (B, 1, 3, H, W) F0.
+    """
+    dg = ndf_ggx(geo["nh"], alpha) * visibility_smith_schlick(geo["nl"], geo["nv"], alpha) * (0.25 * math.pi)
+    return geo["irradiance"] * (diffuse_term + dg * fresnel_schlick(geo["vh"], specular))
 
 
 def _highlight_suppressor(d):
@@ -202,9 +224,11 @@ def intermediate_targets(maps, light=cv.FLASH_POSITION, intensity=cv.LIGHT_INTEN
         out["I"] = image
     if "I_bf" in names:
         out["I_bf"] = bumpiness_flattened(maps, light, intensity, camera=camera)
-    if "I_hr" in names:
+    if "I_hr" in names and "I_hr2" in names:
+        out["I_hr"], out["I_hr2"] = highlight_removed_pair(maps, cam, intensity)
+    elif "I_hr" in names:
         out["I_hr"] = highlight_removed(maps, cam, intensity)
-    if "I_hr2" in names:
+    elif "I_hr2" in names:
         out["I_hr2"] = highlight_removed(maps, cam, intensity, high_roughness=True)
     if "M_b" in names:
         out["M_b"] = bumpiness_mask(maps, light, intensity, image=image, camera=camera)

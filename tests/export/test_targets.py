@@ -134,3 +134,12 @@ def test_highlight_removed_matches_general_renderer():
         ref = cv.image_to_encoded(acc / 20)
         out = T.highlight_removed(maps, camera=cam, intensity=1.5, high_roughness=high, count=20, chunk=6)
         torch.testing.assert_close(out, ref, rtol=1e-9, atol=1e-9)
+
+
+def test_highlight_removed_pair_equals_separate_calls():
+    maps = _maps(b=3, h=16, w=16)
+    cam = torch.tensor([[0.1, 0.2, 2.0], [0.0, 0.0, 3.0], [-0.3, 0.1, 1.5]], dtype=torch.float64)
+    hr, hr2 = T.highlight_removed_pair(maps, cam, torch.tensor([1.0, 2.0, 0.5], dtype=torch.float64), count=12)
+    assert torch.allclose(hr, T.highlight_removed(maps, cam, torch.tensor([1.0, 2.0, 0.5], dtype=torch.float64), count=12))
+    assert torch.allclose(hr2, T.highlight_removed(maps, cam, torch.tensor([1.0, 2.0, 0.5], dtype=torch.float64),
+                                                   high_roughness=True, count=12))

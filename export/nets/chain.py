@@ -1,0 +1,106 @@
+"""The paper's three-stage model (section III-E), as one module with named stages.
+
+* **masks**: ``M_b`` and ``M_h`` from the photo ``I``, each by a backbone UNet
+  (:class:`export.nets.backbone.BackboneUNet`, Lite0 encoder).
+* **aux**: ``I_bf`` from (I, M_b) by a GAD-UNet; ``I_hr`` and ``I_hr2`` from
+  (I, M_b, M_h) by a second GAD-UNet with six output channels (the paper
+  leaves open whether the two share a network; sharing halves the cost).
+* **maps**: N from (I, I - I_bf); D and S together from (I, I_hr, I_hr2);
+  R from (I, I_hr, I_hr2), each by a plain UNet.
+
+Images and masks are in [0, 1] (encoded); the maps come out in their stored
+encoding (:func:`svbrdf_cli.conventions.encode_maps`): normals xyz*0.5+0.5
+(renormalised), diffuse and specular gamma-encoded, roughness linear. Every
+input is centred to [-1, 1] for the UNets; the backbone normalises its own.
+
+Tiers scale every network's width; :func:`build` makes one.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import torch
+from torch import nn
+
+from export.nets.backbone import BackboneUNet
+from export.nets.gad import GADUNet
+from export.nets.unet import UNet
+from svbrdf_cli import conventions as cv
+
+STAGES = ("masks", "aux", "maps")
+
+
+@dataclasses.dataclass(frozen=True)
+class Tier:
+    """Widths of one model size."""
+
+    mask_width: float   # BackboneUNet decoder width multiplier
+    aux_base: int       # GAD-UNet base channels
+    map_base: int       # UNet base channels
+    depth: int = 5
+
+
+TIERS = {
+    "fast": Tier(mask_width=0.25, aux_base=16, map_base=16),
+    "balanced": Tier(mask_width=0.5, aux_base=32, map_base=32),
+    "best": Tier(mask_width=1.0, aux_base=48, map_base=48),
+}
+
+
+def _centre(x):
+    return x * 2.0 - 1.0
+
+
+class SVBRDFNet(nn.Module):
+    """All stages; ``forward(photo)`` runs the whole chain."""
+
+    def __init__(self, tier="fast", pretrained=True):
+        super().__init__()
+        t = TIERS[tier] if isinstance(tier, str) else tier
+        self.tier = tier if isinstance(tier, str) else "custom"
+        self.masks = nn.ModuleDict({
+            "M_b": BackboneUNet(3, width=t.mask_width, pretrained=pretrained),
+            "M_h": BackboneUNet(3, width=t.mask_width, pretrained=pretrained),
+        })
+        for net in self.masks.values():  # masks are mostly 0: start there (sigmoid(-4) = 0.018)
+            nn.init.constant_(net.head.bias, -4.0)
+        self.aux = nn.ModuleDict({
+            "I_bf": GADUNet(6, 3, base=t.aux_base, depth=t.depth),
+            "I_hr": GADUNet(9, 6, base=t.aux_base, depth=t.depth),
+        })
+        self.maps = nn.ModuleDict({
+            "normal": UNet(6, 3, base=t.map_base, depth=t.depth),
+            "diffuse_specular": UNet(9, 6, base=t.map_base, depth=t.depth),
+            "roughness": UNet(9, 1, base=t.map_base, depth=t.depth),
+        })
+
+    def stage(self, name):
+        return getattr(self, name)
+
+    def run_masks(self, photo):
+        return {k: net(photo) for k, net in self.masks.items()}
+
+    def run_aux(self, photo, masks):
+        x_bf = _centre(torch.cat([photo, masks["M_b"]], 1))
+        x_hr = _centre(torch.cat([photo, masks["M_b"], masks["M_h"]], 1))
+        hr = self.aux["I_hr"](x_hr)
+        return {"I_bf": self.aux["I_bf"](x_bf), "I_hr": hr[:, :3], "I_hr2": hr[:, 3:]}
+
+    def run_maps(self, photo, aux):
+        x_n = torch.cat([_centre(photo), photo - aux["I_bf"]], 1)
+        x_s = _centre(torch.cat([photo, aux["I_hr"], aux["I_hr2"]], 1))
+        n = cv.normalize(_centre(self.maps["normal"](x_n)), axis=1)
+        ds = self.maps["diffuse_specular"](x_s)
+        return {"normal": cv.encode_normals(n), "diffuse": ds[:, :3],
+                "roughness": self.maps["roughness"](x_s), "specular": ds[:, 3:]}
+
+    def forward(self, photo):
+        """Photo (B, 3, H, W) in [0, 1] -> dict of stored-encoding maps (and the intermediates)."""
+        masks = self.run_masks(photo)
+        aux = self.run_aux(photo, masks)
+        return {**masks, **aux, **self.run_maps(photo, aux)}
+
+
+def build(tier="fast", pretrained=True):
+    return SVBRDFNet(tier, pretrained=pretrained)

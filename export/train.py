@@ -1,0 +1,355 @@
+"""Stage-by-stage training (paper section IV-A4), resumable, on CPU or GPU.
+
+    python -m export.train --stage masks --tier fast --minutes 20 --out runs/fast
+    python -m export.train --stage all --tier fast --steps 3000 --device cuda --size 256 --batch 16
+
+Stages train in order with the earlier ones frozen (their checkpoints must
+exist in ``--out``): **masks** (L2), **aux** (L1 + perceptual + WGAN-GP),
+**maps** (L1 + rendering loss). Adam with betas (0.5, 0.9), lr 2e-4 (the
+backbone encoders at a tenth of it: fine-tuning), halved at 30, 60 and 90 %
+of the run (the paper halves every 60k of 200k iterations). With
+``--minutes`` the step count is set from the measured time of the first
+steps; it is then fixed, stored in the checkpoint, and a resumed run keeps it.
+
+Samples come on the fly from :mod:`export.data.dataset` (its generator's
+state is checkpointed, so a resumed run sees the samples the uninterrupted
+run would have). Each stage writes ``<out>/<stage>.pt`` (weights, optimiser,
+generator, step, history) every ``--checkpoint-every`` steps and at the end,
+and ``<out>/provenance.json`` records data, steps, device, time and
+validation numbers of every stage.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import platform
+import tempfile
+import time
+
+import click
+import torch
+import torch.nn.functional as F
+
+from export import losses as L
+from export.data import dataset as D
+from export.nets.chain import STAGES, TIERS, SVBRDFNet
+from svbrdf_cli import conventions as cv
+
+#: Ground truth each stage needs from the data engine.
+STAGE_TARGETS = {"masks": ("M_b", "M_h"), "aux": ("I_bf", "I_hr", "I_hr2"), "maps": ()}
+BETAS = (0.5, 0.9)
+LR = 2e-4
+BACKBONE_LR_SCALE = 0.1
+#: Budget split of ``--stage all`` (the paper trains 200k/200k/300k iterations).
+ALL_SPLIT = {"masks": 2 / 7, "aux": 2 / 7, "maps": 3 / 7}
+VAL_SEED = 1
+VAL_STREAM = 10_000
+
+
+@dataclasses.dataclass
+class RunConfig:
+    tier: str = "fast"
+    size: int = 128
+    batch: int = 8
+    seed: int = 0
+    device: str = "cpu"
+    adversarial: bool = True
+    perceptual: bool = True
+    val_samples: int = 16
+
+
+def _atomic_save(obj, path):
+    fd, tmp = tempfile.mkstemp(dir=os.path.dirname(path) or ".", suffix=".part")
+    os.close(fd)
+    torch.save(obj, tmp)
+    os.replace(tmp, path)
+
+
+def _read_json(path):
+    if os.path.exists(path):
+        with open(path) as f:
+            return json.load(f)
+    return {}
+
+
+def _write_json(path, data):
+    fd, tmp = tempfile.mkstemp(dir=os.path.dirname(path) or ".", suffix=".part")
+    with os.fdopen(fd, "w") as f:
+        json.dump(data, f, indent=1)
+    os.replace(tmp, path)
+
+
+def _stored_targets(batch):
+    return cv.encode_maps({k: batch[k] for k in cv.MAP_NAMES})
+
+
+class StageTrainer:
+    """One stage's training state: model, optimisers, data stream, step."""
+
+    def __init__(self, stage, out, config: RunConfig, net=None, bank=None):
+        self.stage, self.out, self.cfg = stage, out, config
+        self.device = torch.device(config.device)
+        self.net = net if net is not None else SVBRDFNet(config.tier).to(self.device)
+        self.bank = bank
+        self.data_cfg = D.DataConfig(size=config.size, targets=STAGE_TARGETS[stage])
+        self.gen = D.worker_generator(config.seed, STAGES.index(stage) + 1, "cpu")
+        self.step = 0
+        self.total = None
+        self.elapsed = 0.0
+        self.history = []
+        self._load_frozen()
+        module = self.net.stage(stage)
+        self.net.requires_grad_(False)
+        module.requires_grad_(True)
+        groups = []
+        if stage == "masks":
+            enc = [p for n, p in module.named_parameters() if ".encoder." in n]
+            rest = [p for n, p in module.named_parameters() if ".encoder." not in n]
+            groups = [{"params": rest, "lr": LR}, {"params": enc, "lr": LR * BACKBONE_LR_SCALE}]
+        else:
+            groups = [{"params": list(module.parameters()), "lr": LR}]
+        for gp in groups:
+            gp["base_lr"] = gp["lr"]
+        self.opt = torch.optim.Adam(groups, betas=BETAS)
+        self.features = self.critics = self.critic_opt = None
+        if stage == "aux":
+            if config.perceptual:
+                from export.nets.lite0 import Lite0Features
+                self.features = Lite0Features().to(self.device)
+            if config.adversarial:
+                self.critics = torch.nn.ModuleDict({k: L.Critic() for k in ("I_bf", "I_hr", "I_hr2")}).to(self.device)
+                self.critic_opt = torch.optim.Adam(self.critics.parameters(), lr=LR, betas=BETAS)
+        self.path = os.path.join(out, f"{stage}.pt")
+
+    # -- frozen earlier stages and checkpoints ---------------------------------
+    def _load_frozen(self):
+        for s in STAGES[:STAGES.index(self.stage)]:
+            p = os.path.join(self.out, f"{s}.pt")
+            if not os.path.exists(p):
+                raise click.ClickException(f"{p}: stage '{s}' must be trained before '{self.stage}'")
+            ck = torch.load(p, map_location=self.device, weights_only=False)
+            self.net.stage(s).load_state_dict(ck["weights"])
+
+    def state(self):
+        return {"stage": self.stage, "weights": self.net.stage(self.stage).state_dict(),
+                "optimizer": self.opt.state_dict(), "step": self.step, "total": self.total,
+                "elapsed": self.elapsed, "history": self.history, "generator": self.gen.get_state(),
+                "critics": self.critics.state_dict() if self.critics is not None else None,
+                "critic_optimizer": self.critic_opt.state_dict() if self.critic_opt is not None else None,
+                "config": dataclasses.asdict(self.cfg), "conventions": cv.CONVENTIONS_VERSION}
+
+    def save(self):
+        os.makedirs(self.out, exist_ok=True)
+        _atomic_save(self.state(), self.path)
+
+    def resume(self):
+        if not os.path.exists(self.path):
+            return False
+        ck = torch.load(self.path, map_location=self.device, weights_only=False)
+        if ck["config"]["tier"] != self.cfg.tier:
+            raise click.ClickException(f"{self.path}: was trained as tier {ck['config']['tier']!r}, not {self.cfg.tier!r}")
+        self.net.stage(self.stage).load_state_dict(ck["weights"])
+        self.opt.load_state_dict(ck["optimizer"])
+        self.step, self.total, self.elapsed = ck["step"], ck["total"], ck["elapsed"]
+        self.history = ck["history"]
+        self.gen.set_state(ck["generator"])
+        if self.critics is not None and ck.get("critics"):
+            self.critics.load_state_dict(ck["critics"])
+            self.critic_opt.load_state_dict(ck["critic_optimizer"])
+        return True
+
+    # -- one step ---------------------------------------------------------------
+    def _lr(self):
+        done = self.step / max(1, self.total or 1)
+        scale = 0.5 ** sum(done >= f for f in (0.3, 0.6, 0.9))
+        for gp in self.opt.param_groups:
+            gp["lr"] = gp["base_lr"] * scale
+        return scale * LR
+
+    def batch(self, generator=None, n=None):
+        b = D.make_batch(generator or self.gen, n or self.cfg.batch, self.data_cfg, self.bank, device="cpu")
+        return {k: v.to(self.device) for k, v in b.items() if torch.is_tensor(v)}
+
+    def losses(self, b, train=True):
+        net, photo = self.net, b["photo"]
+        if self.stage == "masks":
+            pred = net.run_masks(photo)
+            parts = {k: L.mask_loss(pred[k], b[k]) for k in ("M_b", "M_h")}
+            return sum(parts.values()), parts, pred
+        with torch.no_grad():
+            masks = net.run_masks(photo)
+        if self.stage == "aux":
+            pred = net.run_aux(photo, masks)
+            total, parts = 0, {}
+            for k in ("I_bf", "I_hr", "I_hr2"):
+                critic = self.critics[k] if (self.critics is not None and train) else None
+                t, p = L.aux_loss(pred[k], b[k], self.features, critic)
+                total = total + t
+                parts.update({f"{k}_{n}": v for n, v in p.items()})
+            return total, parts, pred
+        with torch.no_grad():
+            aux = net.run_aux(photo, masks)
+        pred = net.run_maps(photo, aux)
+        target = _stored_targets(b)
+        lights, cams = L.random_light_views(photo.shape[0], generator=self.gen if train else
+                                            torch.Generator().manual_seed(0), device=self.device)
+        total, parts = L.map_losses(pred, target, lights, cams)
+        return total, parts, pred
+
+    def train_step(self):
+        self.net.eval()  # frozen stages keep their BatchNorm statistics
+        self.net.stage(self.stage).train()
+        self._lr()
+        b = self.batch()
+        self.opt.zero_grad()
+        total, parts, pred = self.losses(b)
+        total.backward()
+        self.opt.step()
+        if self.critics is not None:
+            self.critic_opt.zero_grad()
+            closs = sum(L.critic_loss(self.critics[k], b[k], pred[k].detach()) for k in self.critics)
+            closs.backward()
+            self.critic_opt.step()
+            parts["critic"] = closs
+        self.step += 1
+        return float(total.detach()), {k: float(v.detach()) for k, v in parts.items()}
+
+    @torch.no_grad()
+    def validate(self):
+        """Fixed validation samples (same every time): RMSE per output."""
+        module = self.net.stage(self.stage)
+        module.eval()
+        g = D.worker_generator(VAL_SEED, VAL_STREAM)
+        b = self.batch(g, self.cfg.val_samples)
+        _, _, pred = self.losses(b, train=False)
+        ref = _stored_targets(b) if self.stage == "maps" else b
+        out = {f"rmse_{k}": float(((pred[k] - ref[k]) ** 2).mean().sqrt()) for k in pred}
+        module.train()
+        return out
+
+
+def train_stage(stage, out, config, steps=None, minutes=None, resume=True, checkpoint_every=50,
+                val_every=100, progress=True, bank=None, net=None, log=print, until=None):
+    """Train one stage; returns the trainer (with its history).
+
+    ``until``: stop (checkpointed) at this step, as an interruption would;
+    the run resumes from there.
+    """
+    from tqdm import tqdm
+
+    t = StageTrainer(stage, out, config, net=net, bank=bank)
+    resumed = resume and t.resume()
+    if resumed:
+        log(f"{stage}: resuming at step {t.step}/{t.total}")
+    if t.total is None:
+        if steps:
+            t.total = int(steps)
+        elif not minutes:
+            raise click.ClickException("give --steps or --minutes")
+    start = time.perf_counter()
+    base_elapsed = t.elapsed
+    bar = tqdm(total=t.total, initial=t.step, desc=stage, unit="step", disable=not progress, dynamic_ncols=True)
+    last = None
+    while t.total is None or t.step < t.total:
+        loss, parts = t.train_step()
+        t.elapsed = base_elapsed + time.perf_counter() - start
+        if t.total is None and t.step >= 2:  # budget -> steps, from the measured pace
+            t.total = max(t.step + 1, int(minutes * 60 / (t.elapsed / t.step)))
+            bar.total = t.total
+            bar.refresh()
+        bar.update(1)
+        bar.set_postfix(loss=f"{loss:.4f}", lr=f"{t._lr():.1e}")
+        t.history.append({"step": t.step, "loss": loss})
+        if t.step % val_every == 0 or t.step == t.total:
+            last = {"step": t.step, **t.validate()}
+            t.history[-1]["val"] = last
+            bar.write(f"{stage} step {t.step}: " + " ".join(f"{k}={v:.4f}" for k, v in last.items() if k != "step"))
+        if t.step % checkpoint_every == 0 or t.step == t.total:
+            t.save()
+        if until is not None and t.step >= until:
+            t.save()
+            bar.close()
+            return t
+    bar.close()
+    if last is None:
+        last = {"step": t.step, **t.validate()}
+    t.save()
+    record_provenance(out, t, last)
+    return t
+
+
+def record_provenance(out, trainer, val):
+    path = os.path.join(out, "provenance.json")
+    prov = _read_json(path)
+    cfg = trainer.cfg
+    prov.setdefault("stages", {})[trainer.stage] = {
+        "tier": cfg.tier, "steps": trainer.step, "batch": cfg.batch, "size": cfg.size, "seed": cfg.seed,
+        "device": str(trainer.device) + ("" if trainer.device.type != "cpu" else f" ({platform.processor() or platform.machine()}, {torch.get_num_threads()} threads)"),
+        "seconds": round(trainer.elapsed, 1), "samples_seen": trainer.step * cfg.batch,
+        "losses": {"adversarial": cfg.adversarial, "perceptual": cfg.perceptual} if trainer.stage == "aux" else None,
+        "validation": val, "final_loss": trainer.history[-1]["loss"] if trainer.history else None,
+        "data": {"generator": "export.data.dataset.make_batch", "config": D._config_dict(trainer.data_cfg),
+                 "cc0_seeds": trainer.bank.names if trainer.bank is not None else [],
+                 "validation": f"{cfg.val_samples} samples, seed {VAL_SEED} stream {VAL_STREAM}"},
+        "conventions": cv.CONVENTIONS_VERSION, "torch": torch.__version__,
+        "finished": time.strftime("%Y-%m-%dT%H:%M:%S"),
+    }
+    _write_json(path, prov)
+
+
+def load_trained(out, tier=None, device="cpu", stages=STAGES):
+    """An :class:`SVBRDFNet` with the stage weights found in ``out`` (eval mode)."""
+    tier = tier or _read_json(os.path.join(out, "provenance.json")).get("stages", {}).get("masks", {}).get("tier", "fast")
+    net = SVBRDFNet(tier, pretrained=False).to(device)
+    for s in stages:
+        p = os.path.join(out, f"{s}.pt")
+        if os.path.exists(p):
+            net.stage(s).load_state_dict(torch.load(p, map_location=device, weights_only=False)["weights"])
+    return net.eval()
+
+
+@click.command()
+@click.option("--stage", type=click.Choice(STAGES + ("all",)), default="all", show_default=True)
+@click.option("--tier", type=click.Choice(tuple(TIERS)), default="fast", show_default=True)
+@click.option("--out", type=click.Path(file_okay=False), default=None, help="Run folder (default runs/<tier>).")
+@click.option("--steps", type=int, default=None, help="Steps per stage (split for --stage all).")
+@click.option("--minutes", type=float, default=None, help="Time budget instead of --steps (split for --stage all).")
+@click.option("--batch", default=8, show_default=True)
+@click.option("--size", default=128, show_default=True, help="Training crop size (multiple of 32).")
+@click.option("--device", default="cpu", show_default=True)
+@click.option("--seed", default=0, show_default=True)
+@click.option("--threads", default=0, help="torch threads (0: default).")
+@click.option("--fresh", is_flag=True, help="Start over instead of resuming a stage's checkpoint.")
+@click.option("--no-adversarial", is_flag=True, help="Aux stage without the WGAN-GP term.")
+@click.option("--checkpoint-every", default=50, show_default=True)
+@click.option("--val-every", default=100, show_default=True)
+@click.option("--shared", type=click.Path(file_okay=False), default=None,
+              help="Shared data folder with materials/ (CC0 seeds); default ../shared/data.")
+def cli(stage, tier, out, steps, minutes, batch, size, device, seed, threads, fresh, no_adversarial,
+        checkpoint_every, val_every, shared):
+    """Train the model stage by stage."""
+    if threads:
+        torch.set_num_threads(threads)
+    if size % 32:
+        raise click.BadParameter("must be a multiple of 32", param_hint="--size")
+    out = out or os.path.join("runs", tier)
+    from export.data.realism import shared_root
+
+    root = shared or str(shared_root() / "data")
+    bank = D.SeedBank(root) if os.path.isdir(os.path.join(root, "materials")) else None
+    cfg = RunConfig(tier=tier, size=size, batch=batch, seed=seed, device=device, adversarial=not no_adversarial)
+    stages = STAGES if stage == "all" else (stage,)
+    for s in stages:
+        share = ALL_SPLIT[s] if stage == "all" else 1.0
+        train_stage(s, out, cfg, steps=math.ceil(steps * share) if steps else None,
+                    minutes=minutes * share if minutes else None, resume=not fresh,
+                    checkpoint_every=checkpoint_every, val_every=val_every, bank=bank,
+                    log=click.echo)
+    click.echo(f"{out}: " + ", ".join(f"{s}.pt" for s in stages) + ", provenance.json")
+
+
+if __name__ == "__main__":
+    cli()

