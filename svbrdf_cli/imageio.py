@@ -79,6 +79,7 @@ def write_image(path, pixels, bits=8):
         a = a[..., None]
     if bits != 32:
         a = a.clip(0.0, 1.0)
+    a = np.ascontiguousarray(a)  # OpenImageIO rejects strided views
     h, w, c = a.shape
     folder = os.path.dirname(os.path.abspath(path))
     ext = os.path.splitext(path)[1]

@@ -35,3 +35,14 @@ def test_written_file_has_umask_mode(tmp_path):
         assert stat.S_IMODE(p.stat().st_mode) == 0o644
     finally:
         os.umask(old)
+
+
+def test_write_image_accepts_strided_views(tmp_path):
+    import numpy as np
+
+    from svbrdf_cli.imageio import read_image, write_image
+
+    chw = np.random.default_rng(0).random((3, 8, 6)).astype(np.float32)
+    view = chw.transpose(1, 2, 0)  # not C-contiguous
+    write_image(tmp_path / "v.png", view, bits=16)
+    assert np.allclose(read_image(tmp_path / "v.png"), view, atol=1 / 65535)

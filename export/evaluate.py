@@ -1,0 +1,156 @@
+"""Evaluate a trained run on the Des19 validation samples (paper Tables I and IV).
+
+    python -m export.evaluate --run runs/fast
+
+For every sample of ``../shared/data/validation/des19`` it predicts the maps
+from ``input.png``, writes them as native map sets under ``--out`` and scores
+them with the paper's metric, the reference scorer
+``../shared/tools/score_maps.py`` (run as it is, not restated). It also
+reports the re-rendering RMSE under 9 fixed lights (encoded images,
+ground-truth vs predicted maps) and the step-by-step analysis of Table IV:
+
+* ``full``: input -> masks -> aux -> maps;
+* ``gt_masks``: ground-truth masks -> aux -> maps;
+* ``gt_aux``: ground-truth aux renderings -> maps (the upper bound of the
+  maps stage).
+
+Ground-truth masks and aux renderings are rendered from the ground-truth
+maps at the paper's geometry (flash at the default position) with the flash
+intensity that gives the input's mean brightness: the light positions of the
+Des19 inputs are not given (they vary within +-0.35 around the centre), so
+these targets are close to, not exactly, what the input shows.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+
+import click
+import numpy as np
+import torch
+
+from export.render import targets as T
+from export.render.brdf import render
+from svbrdf_cli import conventions as cv
+from svbrdf_cli.imageio import read_image
+from svbrdf_cli.mapset import read_map_set, write_map_set
+
+MODES = ("full", "gt_masks", "gt_aux")
+#: Fixed relighting positions for the re-rendering RMSE (8 around + 1 centre, as in 9-light captures).
+RELIGHT = [(0.0, 0.0, cv.CAMERA_HEIGHT)] + [
+    (1.2 * np.cos(a), 1.2 * np.sin(a), cv.CAMERA_HEIGHT) for a in np.linspace(0, 2 * np.pi, 9)[:-1]]
+
+
+def shared_root():
+    from export.data.realism import shared_root as root
+
+    return root()
+
+
+def load_des19(folder):
+    """[(name, input (3, H, W) tensor, linear GT maps dict of (C, H, W))]."""
+    out = []
+    for name in sorted(os.listdir(folder)):
+        d = os.path.join(folder, name)
+        if not os.path.isfile(os.path.join(d, "input.png")):
+            continue
+        img = torch.from_numpy(read_image(os.path.join(d, "input.png"))[..., :3]).permute(2, 0, 1).float()
+        maps = {k: torch.from_numpy(np.ascontiguousarray(v)).permute(2, 0, 1).float()
+                for k, v in read_map_set(d).items()}
+        maps["roughness"] = maps["roughness"][:1]
+        out.append((name, img, maps))
+    return out
+
+
+def ground_truth_intermediates(photo, maps):
+    """Masks and aux renderings from GT maps, exposed like the input (see module doc)."""
+    m = {k: v[None] for k, v in maps.items()}
+    intensity = T.auto_exposure(m, target=float(photo.mean()))
+    return {k: v[0] for k, v in T.intermediate_targets(m, intensity=intensity,
+                                                        names=("I_bf", "I_hr", "I_hr2", "M_b", "M_h")).items()}
+
+
+@torch.no_grad()
+def predict(net, photo, mode="full", gt=None):
+    x = photo[None]
+    if mode == "gt_aux":
+        aux = {k: gt[k][None] for k in ("I_bf", "I_hr", "I_hr2")}
+    else:
+        masks = net.run_masks(x) if mode == "full" else {k: gt[k][None] for k in ("M_b", "M_h")}
+        aux = net.run_aux(x, masks)
+    out = net.run_maps(x, aux)
+    return {k: v[0] for k, v in out.items()}
+
+
+def relight_rmse(pred_linear, gt_linear):
+    """Mean RMSE of encoded renderings under :data:`RELIGHT`."""
+    errs = []
+    for light in RELIGHT:
+        a = cv.image_to_encoded(render(*(pred_linear[k][None] for k in cv.MAP_NAMES), light=light))
+        b = cv.image_to_encoded(render(*(gt_linear[k][None] for k in cv.MAP_NAMES), light=light))
+        errs.append(float(((a - b) ** 2).mean().sqrt()))
+    return float(np.mean(errs))
+
+
+def score(gt_root, pred_root=None, prefix=""):
+    """Run the reference scorer; returns {map: rmse} and its output line."""
+    scorer = shared_root() / "tools" / "score_maps.py"
+    cmd = [sys.executable, str(scorer), str(gt_root)] + (["--pred", str(pred_root)] if pred_root else []) \
+        + (["--prefix", prefix] if prefix else [])
+    res = subprocess.run(cmd, capture_output=True, text=True)
+    line = res.stdout.strip().splitlines()[-1] if res.stdout.strip() else res.stderr.strip()
+    vals = dict(re.findall(r"(normal|diffuse|roughness|specular)=([0-9.]+)", line))
+    return {k: float(v) for k, v in vals.items()}, line
+
+
+def evaluate(run, des19=None, out=None, modes=MODES, log=print):
+    from export.train import load_trained
+
+    des19 = des19 or str(shared_root() / "data" / "validation" / "des19")
+    if not os.path.isdir(des19):
+        raise click.ClickException(f"{des19}: Des19 validation samples not found (set SVBRDF_SHARED)")
+    net = load_trained(run)
+    samples = load_des19(des19)
+    out = out or tempfile.mkdtemp(prefix="svbrdf-eval-")
+    results = {}
+    for mode in modes:
+        rel = []
+        for name, photo, gt in samples:
+            inter = ground_truth_intermediates(photo, gt) if mode != "full" else None
+            pred = predict(net, photo, mode, inter)
+            lin = cv.decode_maps({k: pred[k] for k in cv.MAP_NAMES}, axis=0)
+            write_map_set(os.path.join(out, mode, name), {k: v.permute(1, 2, 0).numpy() for k, v in lin.items()})
+            rel.append(relight_rmse(lin, gt))
+        maps, line = score(des19, os.path.join(out, mode))
+        results[mode] = {**maps, "relight": float(np.mean(rel)), "samples": len(samples)}
+        log(f"{mode:9s} {line}  relight={np.mean(rel):.4f}")
+    paper, line = score(des19, prefix="paper_")
+    results["paper"] = paper
+    log(f"{'paper':9s} {line}")
+    return results
+
+
+@click.command()
+@click.option("--run", "run", type=click.Path(exists=True, file_okay=False), required=True,
+              help="Run folder holding masks.pt, aux.pt, maps.pt.")
+@click.option("--des19", type=click.Path(file_okay=False), default=None)
+@click.option("--out", type=click.Path(file_okay=False), default=None, help="Where predicted maps go.")
+@click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None, help="Write the numbers here too.")
+@click.option("--threads", default=0)
+def cli(run, des19, out, json_out, threads):
+    """Score a trained run on Des19 with the paper's metric."""
+    if threads:
+        torch.set_num_threads(threads)
+    results = evaluate(run, des19, out, log=click.echo)
+    if json_out:
+        with open(json_out, "w") as f:
+            json.dump(results, f, indent=1)
+
+
+if __name__ == "__main__":
+    cli()
