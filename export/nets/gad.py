@@ -38,7 +38,7 @@ import torch
 from torch import nn
 
 from .deform import DeformConv2d
-from .unet import UpBlock, apply_activation, init_conv_, level_widths, make_norm
+from .unet import Decoder, apply_activation, init_conv_, level_widths, make_norm
 
 __all__ = ["GADConv", "GADUNet"]
 
@@ -108,12 +108,7 @@ class GADUNet(nn.Module):
             blocks = [GADConv(cin, w[i], 1 if i == 0 else 2, norm)]
             blocks += [GADConv(w[i], w[i], 1, norm) for _ in range(blocks_per_level - 1)]
             self.enc.append(nn.Sequential(*blocks))
-        self.up = nn.ModuleList(
-            UpBlock(w[i], w[i - 1], w[i - 1], norm) for i in range(depth, 0, -1)
-        )
-        self.head = nn.Conv2d(w[0], out_channels, 1)
-        nn.init.xavier_uniform_(self.head.weight)
-        nn.init.zeros_(self.head.bias)
+        self.decoder = Decoder(w, out_channels, norm)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         skips = []
@@ -121,7 +116,4 @@ class GADUNet(nn.Module):
         for level in self.enc:
             y = level(y)
             skips.append(y)
-        y = skips.pop()
-        for up in self.up:
-            y = up(y, skips.pop())
-        return apply_activation(self.head(y), self.out_activation)
+        return apply_activation(self.decoder(skips), self.out_activation)

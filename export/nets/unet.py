@@ -105,6 +105,27 @@ class UpBlock(nn.Module):
         return self.conv(torch.cat([x, skip], dim=1))
 
 
+class Decoder(nn.Module):
+    """The UNet decoder shared by :class:`UNet` and the GAD-UNet: from the
+    deepest of ``skips`` (one per level, widths ``widths``) up through
+    :class:`UpBlock`\ s to a 1x1 head (no activation)."""
+
+    def __init__(self, widths, out_channels, norm=None):
+        super().__init__()
+        d = len(widths) - 1
+        self.up = nn.ModuleList(UpBlock(widths[i], widths[i - 1], widths[i - 1], norm) for i in range(d, 0, -1))
+        self.head = nn.Conv2d(widths[0], out_channels, 1)
+        nn.init.xavier_uniform_(self.head.weight)
+        nn.init.zeros_(self.head.bias)
+
+    def forward(self, skips):
+        skips = list(skips)
+        y = skips.pop()
+        for up in self.up:
+            y = up(y, skips.pop())
+        return self.head(y)
+
+
 def apply_activation(x: torch.Tensor, kind: str | None) -> torch.Tensor:
     if kind is None or kind == "none":
         return x
@@ -142,18 +163,10 @@ class UNet(nn.Module):
             nn.Sequential(nn.MaxPool2d(2), DoubleConv(w[i - 1], w[i], 1, norm))
             for i in range(1, depth + 1)
         )
-        self.up = nn.ModuleList(
-            UpBlock(w[i], w[i - 1], w[i - 1], norm) for i in range(depth, 0, -1)
-        )
-        self.head = nn.Conv2d(w[0], out_channels, 1)
-        nn.init.xavier_uniform_(self.head.weight)
-        nn.init.zeros_(self.head.bias)
+        self.decoder = Decoder(w, out_channels, norm)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         skips = [self.inc(x)]
         for down in self.down:
             skips.append(down(skips[-1]))
-        y = skips.pop()
-        for up in self.up:
-            y = up(y, skips.pop())
-        return apply_activation(self.head(y), self.out_activation)
+        return apply_activation(self.decoder(skips), self.out_activation)
