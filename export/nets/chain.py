@@ -104,3 +104,48 @@ class SVBRDFNet(nn.Module):
 
 def build(tier="fast", pretrained=True):
     return SVBRDFNet(tier, pretrained=pretrained)
+
+
+def tier_costs(size=256):
+    """{tier: {stage: (parameters, MACs)}} for one sample at ``size``² (the whole chain's cost)."""
+    from export.nets.cost import count_macs, count_parameters
+
+    out = {}
+    for name in TIERS:
+        net = SVBRDFNet(name, pretrained=False)
+        x = torch.zeros(1, 3, size, size)
+        row = {}
+        for stage in STAGES:
+            module = net.stage(stage)
+            if stage == "masks":
+                def fn(photo, _net=net):
+                    return _net.run_masks(photo)
+            elif stage == "aux":
+                def fn(photo, _net=net):
+                    return _net.run_aux(photo, {"M_b": photo, "M_h": photo})
+            else:
+                def fn(photo, _net=net):
+                    return _net.run_maps(photo, {"I_bf": photo, "I_hr": photo, "I_hr2": photo})
+            wrapper = _StageCall(module, fn)
+            row[stage] = (count_parameters(module), count_macs(wrapper, (x,)))
+        out[name] = row
+    return out
+
+
+class _StageCall(nn.Module):
+    """Lets :func:`count_macs` hook one stage's layers while a chain method runs it."""
+
+    def __init__(self, module, fn):
+        super().__init__()
+        self.module, self.fn = module, fn
+
+    def forward(self, x):
+        return self.fn(x)
+
+
+if __name__ == "__main__":
+    for tier, row in tier_costs().items():
+        params = sum(p for p, _ in row.values())
+        macs = sum(m for _, m in row.values())
+        stages = ", ".join(f"{s} {p / 1e6:.2f}M/{m / 1e9:.1f}G" for s, (p, m) in row.items())
+        print(f"{tier:9s} {params / 1e6:6.2f}M params {macs / 1e9:6.1f} GMACs at 256²  ({stages})")
