@@ -42,7 +42,9 @@ def read_image(path):
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise ImageReadError(f"Could not read '{path}': no such file. Check the path.")
-    inp = oiio.ImageInput.open(path)
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)  # a 4th channel is data, never premultiplied
+    inp = oiio.ImageInput.open(path, config)
     if inp is None:
         raise ImageReadError(f"Could not read '{path}': {oiio.geterror().strip() or 'unknown format'}. "
                              "Convert it to PNG, TIFF or EXR.")
@@ -90,6 +92,9 @@ def write_image(path, pixels, bits=8):
         if out is None:
             raise ImageWriteError(f"Could not write '{path}': no writer for '{ext}'. Use .png, .tif or .exr.")
         spec = oiio.ImageSpec(w, h, c, _FORMATS[bits])
+        # RGBA in memory is written as given: OpenImageIO would otherwise
+        # treat it as premultiplied and divide by alpha (a mask map's A is data).
+        spec.attribute("oiio:UnassociatedAlpha", 1)
         ok = out.open(tmp, spec) and out.write_image(a)
         out.close()
         if not ok:

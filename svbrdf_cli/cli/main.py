@@ -33,9 +33,11 @@ def cli(ctx, verbose, quiet):
 
 
 def _register():
+    from svbrdf_cli.cli.export import export_cmd
     from svbrdf_cli.cli.render import render_cmd
 
     cli.add_command(render_cmd)
+    cli.add_command(export_cmd)
 
 
 _register()

@@ -46,3 +46,17 @@ def test_write_image_accepts_strided_views(tmp_path):
     view = chw.transpose(1, 2, 0)  # not C-contiguous
     write_image(tmp_path / "v.png", view, bits=16)
     assert np.allclose(read_image(tmp_path / "v.png"), view, atol=1 / 65535)
+
+
+def test_rgba_data_round_trips_unpremultiplied(tmp_path):
+    """A 4th channel is data (a mask map's smoothness), not opacity to premultiply by."""
+    import numpy as np
+
+    from svbrdf_cli.imageio import read_image, write_image
+
+    img = np.zeros((4, 4, 4), np.float32)
+    img[..., 0], img[..., 3] = 0.5, 0.5
+    for bits in (8, 16):
+        write_image(tmp_path / f"m{bits}.png", img, bits=bits)
+        back = read_image(tmp_path / f"m{bits}.png")
+        assert np.allclose(back, img, atol=1 / 255), bits

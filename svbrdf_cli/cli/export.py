@@ -1,0 +1,43 @@
+"""``svbrdf export``: re-target a native map set to an engine's texture-set layout."""
+
+import click
+
+from svbrdf_cli.presets import PNG_ONLY_PRESETS, PRESETS
+
+
+@click.command("export")
+@click.argument("mapset", type=click.Path(file_okay=False))
+@click.option("-o", "--output", required=True, type=click.Path(), help="Folder to write the texture set into (must not exist).")
+@click.option("--preset", required=True, type=click.Choice(list(PRESETS)),
+              help="Target layout: native maps, glTF 2.0, Unreal (ORM, DirectX normal), Unity HDRP (MaskMap), Blender.")
+@click.option("--bits", type=click.Choice(["8", "16"]), default="8", show_default=True,
+              help="PNG bit depth (height maps are always 16-bit).")
+@click.option("--format", "fmt", type=click.Choice(["png", "exr"]), default="png", show_default=True,
+              help="File format of linear data maps (normal, roughness, packed masks, height); "
+                   "exr writes 32-bit float. Base colour stays sRGB PNG.")
+@click.option("--force", is_flag=True, help="Replace an existing output folder (atomically).")
+def export_cmd(mapset, output, preset, bits, fmt, force):
+    """Write a native map set as an engine or DCC texture set, without re-running inference.
+
+    Reads MAPSET (normal/diffuse/roughness/specular.png), converts the
+    specular workflow to metallic-roughness where the preset needs it
+    (glTF's solveMetallic), flips the normal map's green channel for Unreal,
+    integrates a 16-bit height map from the normals, and writes the whole set
+    at once: a failure leaves no partial folder behind. texture_set.json in
+    the set lists each file's role, colour space and the height map's depth.
+
+    \b
+    Examples:
+      svbrdf export out/wood -o wood_ue --preset unreal
+      svbrdf export out/wood -o wood_gltf --preset gltf --bits 16
+      svbrdf export out/wood -o wood_blend --preset blender --format exr --force
+    """
+    from svbrdf_cli.mapset import read_map_set
+    from svbrdf_cli.presets import write_preset
+
+    if fmt != "png" and preset in PNG_ONLY_PRESETS:
+        raise click.UsageError(f"The {preset} preset writes PNG only; drop --format {fmt}.")
+    maps = read_map_set(mapset)
+    paths = write_preset(preset, output, maps, bits=int(bits), fmt=fmt, force=force)
+    h, w = maps["normal"].shape[:2]
+    click.echo(f"wrote {output} ({preset}, {len(paths)} files, {w}x{h})", err=True)

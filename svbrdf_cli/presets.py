@@ -1,0 +1,631 @@
+"""Texture-set presets: our linear map set re-packed for engines and DCC tools.
+
+Each preset is a function ``write_<name>(folder, maps, *, bits, fmt, force)``
+that writes one texture set into ``folder`` and returns the paths it wrote;
+:data:`PRESETS` maps CLI names to them. The input is the runtime's linear map
+set (see :mod:`svbrdf_cli.mapset`): ``normal`` (H, W, 3) unit vectors, +Y up;
+``diffuse`` and ``specular`` (H, W, 3) linear albedo / F0; ``roughness``
+(H, W, 1) perceptual roughness (alpha = r**2, the same parametrisation glTF,
+Unreal, Unity and Blender use, so it is copied, never remapped).
+
+=============  ==================================================================
+preset         files (colour space)
+=============  ==================================================================
+svbrdf         normal.png diffuse.png roughness.png specular.png: the native
+               Des18 encoding, exactly these four files (benchmarks read them)
+gltf           baseColor.png (sRGB); metallicRoughness.png (linear: R = 1, i.e.
+               no occlusion, G = roughness, B = metallic); normal.png (OpenGL,
+               +Y up); height.png; material.gltf (one textured quad)
+unreal         BaseColor.png (sRGB); Normal.png (DirectX: green flipped, Y down);
+               ORM.png (linear: R = AO = 1, G = roughness, B = metallic);
+               Height.png
+unity-hdrp     BaseMap.png (sRGB); MaskMap.png (linear RGBA: R = metallic,
+               G = AO = 1, B = detail mask = 1, A = smoothness = 1 - roughness);
+               Normal.png (OpenGL); Height.png
+blender        <name>_BaseColor.png (sRGB); <name>_Roughness.png,
+               <name>_Metallic.png (Non-Color grey); <name>_Normal.png
+               (OpenGL); <name>_Height.png
+=============  ==================================================================
+
+Every preset but ``svbrdf`` also writes ``texture_set.json``: the preset, the
+normal-map convention, each file's role and colour space, and the height map's
+depth scale (a PNG cannot say how deep its [0, 1] range is).
+
+Blender names follow Node Wrangler's "Principled Texture Setup" (Ctrl+Shift+T),
+which splits a file name at ``_ - . #``, at lower-to-upper case changes and
+drops digits, then matches the lower-cased pieces against its default tags
+(base colour: "diffuse diff albedo base col color basecolor", "roughness rough
+rgh", "metallic metalness metal mtl", "normal nor nrm nrml norm",
+"displacement displace disp dsp height heightmap"). ``BaseColor`` becomes
+"base color", which every version matches (older ones lack the "basecolor"
+tag). It matches the material name too, so a name such as "rusty_metal" would
+wire every map to Metallic: names holding a tag fall back to "material".
+
+Specular -> metallic uses KHR_materials_pbrSpecularGlossiness' ``solveMetallic``
+(see :func:`specular_to_metallic`); the height map is integrated from the
+normals with Frankot-Chellappa (:func:`normals_to_height`).
+
+Sets are written atomically: every file goes into a hidden sibling folder that
+is renamed into place once complete, so a failure never leaves a half-written
+set (or the temporary folder) behind, and an existing set is only replaced
+with ``force=True``.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import logging
+import os
+import re
+import shutil
+import tempfile
+
+import numpy as np
+
+from svbrdf_cli import __version__
+from svbrdf_cli import conventions as cv
+from svbrdf_cli import imageio
+from svbrdf_cli.errors import ImageWriteError, MapSetError
+
+log = logging.getLogger("svbrdf")
+
+#: Output bit depths of integer (PNG) files; EXR is always 32-bit float.
+PNG_BITS = (8, 16)
+#: File formats for linear data; colour (sRGB) maps are always PNG.
+FORMATS = ("png", "exr")
+#: Bit depth of height maps written as PNG (8 bits shows stepping).
+HEIGHT_BITS = 16
+
+#: Rec. 601 luma weights of the "perceived brightness" in the
+#: KHR_materials_pbrSpecularGlossiness conversion sample.
+_BRIGHTNESS_WEIGHTS = (0.299, 0.587, 0.114)
+
+#: Specular brightness within this of the dielectric F0 counts as dielectric.
+#: It is about half a step of an 8-bit gamma-2.2 file near 0.04, so a stored
+#: 0.04 that rounds slightly up cannot pick the quadratic's second, metallic
+#: root for dark dielectrics (see :func:`specular_to_metallic`).
+DIELECTRIC_TOLERANCE = 1e-3
+
+#: Smallest |n_z| used when turning normals into slopes (slope <= 20).
+_MIN_NZ = 0.05
+
+
+# --------------------------------------------------------------------------
+# Conversions
+# --------------------------------------------------------------------------
+
+def _brightness(c):
+    w = np.asarray(_BRIGHTNESS_WEIGHTS, dtype=np.float64)
+    return np.sqrt((c * c * w).sum(-1, keepdims=True))
+
+
+def specular_to_metallic(diffuse, specular, tolerance=DIELECTRIC_TOLERANCE):
+    """Specular/diffuse albedos -> metallic-roughness base colour and metallic.
+
+    KHR_materials_pbrSpecularGlossiness' ``solveMetallic``, written from its
+    definition. The metallic workflow's two lobes are
+
+        specular = lerp(F0, base, m)                    (F0 = DIELECTRIC_F0)
+        c_diff   = base (1 - F0) (1 - m)
+
+    and the specular workflow's diffuse lobe is ``diffuse (1 - max(specular))``
+    (our renderer's ``d (1 - s)`` for grey specular). Working on the perceived
+    brightness ``B(c) = sqrt(0.299 r^2 + 0.587 g^2 + 0.114 b^2)`` of each
+    colour (D for diffuse, S for specular), equating the diffuse lobes gives
+    ``base (1 - m) = D'`` with ``D' = D (1 - max(specular)) / (1 - F0)``;
+    substituting ``base = D' / (1 - m)`` into the specular equation and
+    multiplying by (1 - m):
+
+        F0 m^2 + (D' + S - 2 F0) m + (F0 - S) = 0
+
+    whose larger root is the metallic value (for S > F0 the roots have
+    opposite signs, so it is the only one in [0, 1]). Below F0 the material is
+    a dielectric, m = 0. The base colour blends the two estimates
+    ``diffuse (1 - max(specular)) / (1 - F0) / (1 - m)`` (exact for
+    dielectrics) and ``(specular - F0 (1 - m)) / m`` (exact for metals) with
+    weight m^2, as the sample does.
+
+    Pure dielectrics (specular = F0) and pure metals (diffuse = 0) round-trip
+    exactly through ``diffuse = base (1 - m), specular = lerp(F0, base, m)``.
+    Dark materials are ambiguous (a dark dielectric and a dark grey metal
+    reflect alike); at S = F0 the quadratic's roots are 0 and a spurious
+    metallic one, hence ``tolerance``.
+
+    Args:
+        diffuse: (..., 3) linear diffuse albedo in [0, 1].
+        specular: (..., 3) linear specular albedo (F0) in [0, 1].
+        tolerance: specular brightness up to ``F0 + tolerance`` is dielectric.
+
+    Returns:
+        (base_colour (..., 3) linear RGB in [0, 1], metallic (..., 1) in
+        [0, 1]), float32.
+    """
+    f0 = cv.DIELECTRIC_F0
+    d = np.asarray(diffuse, dtype=np.float64)
+    s = np.asarray(specular, dtype=np.float64)
+    bd, bs = _brightness(d), _brightness(s)
+    keep = 1.0 - s.max(-1, keepdims=True)  # the specular workflow's diffuse weight
+    b = bd * keep / (1.0 - f0) + bs - 2.0 * f0
+    c = f0 - bs
+    disc = np.maximum(b * b - 4.0 * f0 * c, 0.0)
+    m = ((np.sqrt(disc) - b) / (2.0 * f0)).clip(0.0, 1.0)
+    m = np.where(bs < f0 + tolerance, 0.0, m)
+    eps = 1e-6
+    from_diffuse = d * (keep / (1.0 - f0) / np.maximum(1.0 - m, eps))
+    from_specular = (s - f0 * (1.0 - m)) / np.maximum(m, eps)
+    base = from_diffuse + (from_specular - from_diffuse) * (m * m)
+    return base.clip(0.0, 1.0).astype(np.float32), m.astype(np.float32)
+
+
+def normals_to_height(normals, tileable=False):
+    """Height field whose normals best match a normal map (Frankot-Chellappa).
+
+    The slopes are ``dh/dx = -n_x / n_z`` and ``dh/dy = -n_y / n_z`` in
+    surface units; the surface spans ``2 * SURFACE_HALF_SIZE`` units across
+    the image width (square pixels) and row 0 is +Y, so
+    ``dh/drow = -dh/dy * pixel``. The least-squares integrable surface is
+    found in the Fourier domain (Frankot & Chellappa 1988):
+    ``H = -j (wx Gx + wy Gy) / (wx^2 + wy^2)``, mean height 0.
+
+    The FFT treats the map as periodic. A map that does not tile would wrap
+    its left/right and top/bottom slope mismatch into a tilt; unless
+    ``tileable``, the slope field is mirrored to twice the size first (slopes
+    change sign in the mirrored copies), which is periodic by construction.
+
+    Args:
+        normals: (H, W, 3) unit normals, +Y up (OpenGL).
+        tileable: the map tiles; integrate it as periodic without mirroring.
+
+    Returns:
+        (H, W) float32 heights in surface units (mean 0 over the integrated
+        domain).
+    """
+    n = np.asarray(normals, dtype=np.float64)
+    h, w = n.shape[:2]
+    pixel = 2.0 * cv.SURFACE_HALF_SIZE / w
+    nz = np.maximum(n[..., 2], _MIN_NZ)
+    # float32 halves the FFT memory on numpy >= 2 (a 4096^2 map is mirrored to 8192^2).
+    g_col = (-n[..., 0] / nz * pixel).astype(np.float32)   # dh per column step (+x)
+    g_row = (n[..., 1] / nz * pixel).astype(np.float32)    # dh per row step (-y)
+    if not tileable:
+        g_col = np.concatenate([g_col, -g_col[:, ::-1]], 1)
+        g_col = np.concatenate([g_col, g_col[::-1]], 0)
+        g_row = np.concatenate([g_row, g_row[:, ::-1]], 1)
+        g_row = np.concatenate([g_row, -g_row[::-1]], 0)
+    rows, cols = g_col.shape
+    wx = (2.0 * np.pi * np.fft.rfftfreq(cols)[None, :]).astype(np.float32)
+    wy = (2.0 * np.pi * np.fft.fftfreq(rows)[:, None]).astype(np.float32)
+    gx, gy = np.fft.rfft2(g_col), np.fft.rfft2(g_row)
+    denom = wx * wx + wy * wy
+    denom[0, 0] = 1.0
+    spectrum = -1j * (wx * gx + wy * gy) / denom
+    spectrum[0, 0] = 0.0
+    height = np.fft.irfft2(spectrum, s=(rows, cols))
+    return height[:h, :w].astype(np.float32)
+
+
+def height_to_unit(height):
+    """Heights -> ([0, 1] map, depth): ``height = map * depth + offset``.
+
+    Args:
+        height: (H, W) heights in surface units.
+
+    Returns:
+        ((H, W) float32 in [0, 1], depth in surface units per full [0, 1]
+        swing). A flat field gives 0.5 everywhere and depth 0.
+    """
+    lo, hi = float(height.min()), float(height.max())
+    if hi - lo < 1e-12:
+        return np.full(height.shape, 0.5, np.float32), 0.0
+    return ((height - lo) / (hi - lo)).astype(np.float32), hi - lo
+
+
+def normals_to_opengl(normals):
+    """Unit normals -> OpenGL (+Y up) normal-map pixels in [0, 1]."""
+    return cv.encode_normals(np.asarray(normals, dtype=np.float32))
+
+
+def normals_to_directx(normals):
+    """Unit normals -> DirectX (Y down, green flipped) normal-map pixels in [0, 1]."""
+    flip = np.array([1.0, -1.0, 1.0], dtype=np.float32)
+    return cv.encode_normals(np.asarray(normals, dtype=np.float32) * flip)
+
+
+# --------------------------------------------------------------------------
+# Writing a set atomically
+# --------------------------------------------------------------------------
+
+def _check_options(bits, fmt, png_only=None):
+    if bits not in PNG_BITS:
+        raise ValueError(f"bits must be one of {PNG_BITS}; got {bits!r}.")
+    if fmt not in FORMATS:
+        raise ValueError(f"fmt must be one of {FORMATS}; got {fmt!r}.")
+    if png_only and fmt != "png":
+        raise ValueError(f"The {png_only} preset writes PNG only; got fmt={fmt!r}.")
+
+
+def _umask():
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def _write_set(folder, write_files, force):
+    """Run ``write_files(tmp_folder) -> [names]`` and move the result to ``folder``.
+
+    The files go into a hidden temporary sibling of ``folder``; only when all
+    are written is it renamed into place. With ``force`` an existing
+    ``folder`` is renamed away first and deleted once the new set is in.
+
+    Returns:
+        Paths of the written files inside ``folder``.
+    """
+    folder = os.path.abspath(os.fspath(folder))
+    parent, name = os.path.split(folder)
+    if os.path.exists(folder):
+        if not os.path.isdir(folder):
+            raise ImageWriteError(f"'{folder}' is a file; choose a folder name for the texture set.")
+        if not force:
+            raise ImageWriteError(f"'{folder}' already exists; choose another folder or replace it with --force.")
+    try:
+        os.makedirs(parent, exist_ok=True)
+        tmp = tempfile.mkdtemp(prefix=f".{name}.", suffix=".partial", dir=parent)
+    except OSError as e:
+        raise ImageWriteError(f"Could not create a folder in '{parent}': {e.strerror}. Check the path and permissions.") from e
+    old = None
+    try:
+        names = write_files(tmp)
+        os.chmod(tmp, 0o777 & ~_umask())  # mkdtemp makes it 0700
+        if os.path.exists(folder):
+            old = tmp[: -len(".partial")] + ".old"
+            os.rename(folder, old)
+        try:
+            os.rename(tmp, folder)
+        except OSError:
+            if old is not None:
+                os.rename(old, folder)
+                old = None
+            raise
+    except OSError as e:
+        raise ImageWriteError(f"Could not write the texture set '{folder}': {e.strerror or e}. "
+                              "Check the path and free space.") from e
+    finally:
+        if os.path.isdir(tmp):
+            shutil.rmtree(tmp, ignore_errors=True)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+    return [os.path.join(folder, n) for n in names]
+
+
+class _Files:
+    """Collects the images of one set in a temporary folder, plus their roles."""
+
+    def __init__(self, tmp, bits, fmt, preset, normal_convention):
+        self.tmp, self.bits, self.fmt = tmp, bits, fmt
+        self.names = []
+        self.meta = {"generator": f"svbrdf {__version__}", "conventions_version": cv.CONVENTIONS_VERSION,
+                     "preset": preset, "normal_map": normal_convention,
+                     "roughness": "perceptual, GGX alpha = roughness^2", "files": {}}
+
+    def colour(self, stem, pixels, role):
+        """An sRGB-encoded colour map: always PNG."""
+        self._write(stem + ".png", cv.linear_to_srgb(pixels), self.bits, role, "sRGB")
+
+    def data(self, stem, pixels, role, bits=None):
+        """A linear (Non-Color) data map: PNG, or 32-bit float EXR."""
+        if self.fmt == "exr":
+            self._write(stem + ".exr", pixels, 32, role, "linear")
+        else:
+            self._write(stem + ".png", pixels, bits or self.bits, role, "linear")
+
+    def height(self, stem, normals):
+        unit, depth = height_to_unit(normals_to_height(normals))
+        self.data(stem, unit[..., None], "height", bits=HEIGHT_BITS)
+        self.meta["height"] = {
+            "file": self.names[-1], "depth": depth,
+            "depth_to_width": depth / (2.0 * cv.SURFACE_HALF_SIZE),
+            "note": "height = value * depth (surface units; the image is 2 units wide): "
+                    "displacement scale = depth_to_width * the texture's real-world width",
+            "integration": "Frankot-Chellappa from the normal map"}
+
+    def _write(self, name, pixels, bits, role, space):
+        path = os.path.join(self.tmp, name)
+        imageio.write_image(path, pixels, bits=bits)
+        self.names.append(name)
+        self.meta["files"][name] = {"role": role, "colour_space": space, "bits": bits}
+
+    def finish(self, extra=None):
+        meta = dict(self.meta, **(extra or {}))
+        with open(os.path.join(self.tmp, "texture_set.json"), "w") as f:
+            json.dump(meta, f, indent=2)
+            f.write("\n")
+        return self.names + ["texture_set.json"]
+
+
+def _metal_rough(maps):
+    base, metallic = specular_to_metallic(maps["diffuse"], maps["specular"])
+    rough = np.asarray(maps["roughness"], dtype=np.float32)[..., :1].clip(0.0, 1.0)
+    return base, metallic, rough
+
+
+def _check_maps(maps):
+    missing = [k for k in cv.MAP_NAMES if k not in maps]
+    if missing:
+        raise MapSetError(f"The map set lacks {', '.join(missing)}; it needs {', '.join(cv.MAP_NAMES)}.")
+
+
+# --------------------------------------------------------------------------
+# Presets
+# --------------------------------------------------------------------------
+
+def write_svbrdf(folder, maps, *, bits=8, fmt="png", force=False):
+    """Native set: exactly ``normal.png diffuse.png roughness.png specular.png``.
+
+    Written by :func:`svbrdf_cli.mapset.write_map_set` in the Des18 encoding
+    (benchmarks and ``svbrdf render`` read it back). PNG only, no height.
+
+    Args:
+        folder: the set's folder (must not exist unless ``force``).
+        maps: linear map set (see the module docstring).
+        bits: 8 or 16.
+        fmt: "png" only.
+        force: replace an existing folder.
+
+    Returns:
+        List of the four written paths.
+    """
+    from svbrdf_cli import mapset
+
+    _check_options(bits, fmt, png_only="svbrdf")
+    _check_maps(maps)
+
+    def files(tmp):
+        mapset.write_map_set(tmp, maps, bits=bits)
+        return [n + ".png" for n in cv.MAP_NAMES]
+
+    return _write_set(folder, files, force)
+
+
+def write_gltf(folder, maps, *, bits=8, fmt="png", force=False):
+    """glTF 2.0 metallic-roughness set plus ``material.gltf`` (one textured quad).
+
+    ``baseColor.png`` (sRGB), ``metallicRoughness.png`` (linear; R = 1 (no
+    occlusion, so it can double as ``occlusionTexture``), G = roughness,
+    B = metallic), ``normal.png`` (+Y up, linear), ``height.png`` (16-bit,
+    not referenced: glTF has no displacement slot) and ``material.gltf``. glTF
+    core textures are PNG/JPEG, so ``fmt`` must be "png".
+
+    Returns:
+        Written paths.
+    """
+    _check_options(bits, fmt, png_only="gltf")
+    _check_maps(maps)
+    base, metallic, rough = _metal_rough(maps)
+
+    def files(tmp):
+        f = _Files(tmp, bits, fmt, "gltf", "OpenGL (+Y up)")
+        f.colour("baseColor", base, "base colour")
+        f.data("metallicRoughness", np.concatenate([np.ones_like(rough), rough, metallic], -1),
+               "R = 1 (no occlusion), G = roughness, B = metallic")
+        f.data("normal", normals_to_opengl(maps["normal"]), "normal (OpenGL, +Y up)")
+        f.height("height", maps["normal"])
+        doc = gltf_document("baseColor.png", "metallicRoughness.png", "normal.png",
+                            name=os.path.basename(os.path.abspath(folder)), extras={"height": f.meta["height"]})
+        with open(os.path.join(tmp, "material.gltf"), "w") as out:
+            json.dump(doc, out, indent=2)
+            out.write("\n")
+        return f.finish() + ["material.gltf"]
+
+    return _write_set(folder, files, force)
+
+
+def write_unreal(folder, maps, *, bits=8, fmt="png", force=False):
+    """Unreal Engine set: ``BaseColor`` (sRGB), ``Normal`` (DirectX), ``ORM``, ``Height``.
+
+    ORM is linear (import with sRGB off): R = ambient occlusion (1: none
+    estimated), G = roughness, B = metallic. The normal map's green channel is
+    flipped (Y down), as Unreal expects.
+
+    Returns:
+        Written paths.
+    """
+    _check_options(bits, fmt)
+    _check_maps(maps)
+    base, metallic, rough = _metal_rough(maps)
+
+    def files(tmp):
+        f = _Files(tmp, bits, fmt, "unreal", "DirectX (green flipped, Y down)")
+        f.colour("BaseColor", base, "base colour")
+        f.data("Normal", normals_to_directx(maps["normal"]), "normal (DirectX, Y down)")
+        f.data("ORM", np.concatenate([np.ones_like(rough), rough, metallic], -1),
+               "R = AO (1: none), G = roughness, B = metallic")
+        f.height("Height", maps["normal"])
+        return f.finish()
+
+    return _write_set(folder, files, force)
+
+
+def write_unity_hdrp(folder, maps, *, bits=8, fmt="png", force=False):
+    """Unity HDRP Lit set: ``BaseMap`` (sRGB), ``MaskMap`` (RGBA), ``Normal``, ``Height``.
+
+    MaskMap is linear (import with sRGB off): R = metallic, G = AO (1),
+    B = detail mask (1: a detail map, if one is added, applies everywhere),
+    A = smoothness = 1 - roughness. Unity normal maps are OpenGL (+Y up).
+
+    Returns:
+        Written paths.
+    """
+    _check_options(bits, fmt)
+    _check_maps(maps)
+    base, metallic, rough = _metal_rough(maps)
+    one = np.ones_like(rough)
+
+    def files(tmp):
+        f = _Files(tmp, bits, fmt, "unity-hdrp", "OpenGL (+Y up)")
+        f.colour("BaseMap", base, "base colour")
+        f.data("MaskMap", np.concatenate([metallic, one, one, 1.0 - rough], -1),
+               "R = metallic, G = AO (1), B = detail mask (1), A = smoothness = 1 - roughness")
+        f.data("Normal", normals_to_opengl(maps["normal"]), "normal (OpenGL, +Y up)")
+        f.height("Height", maps["normal"])
+        return f.finish()
+
+    return _write_set(folder, files, force)
+
+
+#: Node Wrangler's default Principled Texture Setup tags (see the module docstring).
+_NODE_WRANGLER_TAGS = frozenset(
+    "diffuse diff albedo base col color basecolor sss subsurface metallic metalness metal mtl "
+    "specularity specular spec spc normal nor nrm nrml norm bump bmp roughness rough rgh gloss glossy "
+    "glossiness displacement displace disp dsp height heightmap transmission transparency emission "
+    "emissive emit alpha opacity ao ambient occlusion".split())
+
+
+def _name_components(name):
+    """A file name split the way Node Wrangler splits it (lower-cased pieces)."""
+    name = "".join(ch for ch in name if not ch.isdigit())
+    name = re.sub(r"([a-z])([A-Z])", r"\1 \2", name)
+    return [p.lower() for p in re.split(r"[\s_.\-#]+", name) if p]
+
+
+def blender_prefix(folder):
+    """File-name prefix for the Blender preset: the folder name, unless Node Wrangler would misread it."""
+    raw = os.path.basename(os.path.abspath(os.fspath(folder)))
+    prefix = re.sub(r"[^A-Za-z0-9-]+", "-", raw).strip("-")
+    if not prefix or set(_name_components(prefix)) & _NODE_WRANGLER_TAGS:
+        if prefix:
+            log.warning("Blender preset: '%s' holds a texture tag Node Wrangler matches; "
+                        "naming the files material_*.", raw)
+        return "material"
+    return prefix
+
+
+def write_blender(folder, maps, *, bits=8, fmt="png", force=False):
+    """Blender set, named for Node Wrangler's Principled Texture Setup (Ctrl+Shift+T).
+
+    ``<name>_BaseColor.png`` (sRGB), ``<name>_Roughness`` and
+    ``<name>_Metallic`` (grey, set the Image nodes to Non-Color),
+    ``<name>_Normal`` (OpenGL, Blender's Normal Map node default, Non-Color),
+    ``<name>_Height`` (Non-Color, for a Displacement node). ``<name>`` is
+    :func:`blender_prefix` of the folder.
+
+    Returns:
+        Written paths.
+    """
+    _check_options(bits, fmt)
+    _check_maps(maps)
+    base, metallic, rough = _metal_rough(maps)
+    prefix = blender_prefix(folder)
+
+    def files(tmp):
+        f = _Files(tmp, bits, fmt, "blender", "OpenGL (+Y up)")
+        f.colour(f"{prefix}_BaseColor", base, "base colour")
+        f.data(f"{prefix}_Roughness", rough, "roughness (Non-Color)")
+        f.data(f"{prefix}_Metallic", metallic, "metallic (Non-Color)")
+        f.data(f"{prefix}_Normal", normals_to_opengl(maps["normal"]), "normal (OpenGL, Non-Color)")
+        f.height(f"{prefix}_Height", maps["normal"])
+        return f.finish()
+
+    return _write_set(folder, files, force)
+
+
+#: Preset name -> writer.
+PRESETS = {"svbrdf": write_svbrdf, "gltf": write_gltf, "unreal": write_unreal,
+           "unity-hdrp": write_unity_hdrp, "blender": write_blender}
+#: Presets whose files must be PNG (the native contract; glTF core images).
+PNG_ONLY_PRESETS = ("svbrdf", "gltf")
+
+
+def write_preset(preset, folder, maps, **kwargs):
+    """Write ``maps`` as the texture set ``preset`` (a key of :data:`PRESETS`)."""
+    try:
+        writer = PRESETS[preset]
+    except KeyError:
+        raise ValueError(f"Unknown preset {preset!r}; choose one of {', '.join(PRESETS)}.") from None
+    return writer(folder, maps, **kwargs)
+
+
+# --------------------------------------------------------------------------
+# glTF document
+# --------------------------------------------------------------------------
+
+_FLOAT, _USHORT = 5126, 5123
+_ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
+
+
+def gltf_quad():
+    """The quad's vertex data: a 2 x 2 square in the XY plane facing +Z.
+
+    glTF's UV (0, 0) is the image's top-left corner, so the top edge (y = +1)
+    gets v = 0 and the image appears upright; row 0 is +Y as in our maps. The
+    tangent (+X, w = +1) makes the bitangent cross(N, T) = +Y, matching the
+    OpenGL normal map.
+
+    Returns:
+        dict of float32 ``POSITION`` (4, 3), ``NORMAL`` (4, 3), ``TANGENT``
+        (4, 4), ``TEXCOORD_0`` (4, 2) and uint16 ``indices`` (6,)
+        (counter-clockwise seen from +Z).
+    """
+    s = cv.SURFACE_HALF_SIZE
+    pos = np.array([[-s, -s, 0], [s, -s, 0], [s, s, 0], [-s, s, 0]], np.float32)
+    uv = np.array([[0, 1], [1, 1], [1, 0], [0, 0]], np.float32)
+    return {"POSITION": pos,
+            "NORMAL": np.tile(np.array([0, 0, 1], np.float32), (4, 1)),
+            "TANGENT": np.tile(np.array([1, 0, 0, 1], np.float32), (4, 1)),
+            "TEXCOORD_0": uv,
+            "indices": np.array([0, 1, 2, 0, 2, 3], np.uint16)}
+
+
+def gltf_document(base_colour, metallic_roughness, normal, name="material", extras=None):
+    """A glTF 2.0 JSON document: one textured quad, buffer embedded as base64.
+
+    Args:
+        base_colour, metallic_roughness, normal: image URIs (relative paths).
+        name: node, mesh and material name.
+        extras: JSON-able dict stored as the material's ``extras``.
+
+    Returns:
+        The document as a dict (``json.dump`` it to a ``.gltf`` file).
+    """
+    quad = gltf_quad()
+    blob, views, accessors, attributes = b"", [], [], {}
+    for key in ("POSITION", "NORMAL", "TANGENT", "TEXCOORD_0", "indices"):
+        a = quad[key]
+        data = a.astype("<u2" if key == "indices" else "<f4").tobytes()  # glTF is little-endian
+        views.append({"buffer": 0, "byteOffset": len(blob), "byteLength": len(data),
+                      "target": _ELEMENT_ARRAY_BUFFER if key == "indices" else _ARRAY_BUFFER})
+        acc = {"bufferView": len(views) - 1, "componentType": _USHORT if key == "indices" else _FLOAT,
+               "count": int(a.shape[0]),
+               "type": "SCALAR" if a.ndim == 1 else ("VEC2", "VEC3", "VEC4")[a.shape[1] - 2]}
+        if key == "POSITION":
+            acc["min"] = [float(v) for v in a.min(0)]
+            acc["max"] = [float(v) for v in a.max(0)]
+        accessors.append(acc)
+        if key != "indices":
+            attributes[key] = len(accessors) - 1
+        blob += data + b"\0" * (-len(data) % 4)  # keep every view 4-byte aligned
+    uri = "data:application/octet-stream;base64," + base64.b64encode(blob).decode("ascii")
+    material = {"name": name,
+                "pbrMetallicRoughness": {"baseColorTexture": {"index": 0},
+                                         "metallicRoughnessTexture": {"index": 1},
+                                         "metallicFactor": 1.0, "roughnessFactor": 1.0},
+                "normalTexture": {"index": 2},
+                "doubleSided": True}
+    if extras:
+        material["extras"] = extras
+    return {
+        "asset": {"version": "2.0", "generator": f"svbrdf {__version__}"},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0, "name": name}],
+        "meshes": [{"name": name, "primitives": [{"attributes": attributes, "indices": len(accessors) - 1,
+                                                   "material": 0, "mode": 4}]}],
+        "materials": [material],
+        "textures": [{"sampler": 0, "source": i} for i in range(3)],
+        "images": [{"uri": u} for u in (base_colour, metallic_roughness, normal)],
+        "samplers": [{"magFilter": 9729, "minFilter": 9987, "wrapS": 10497, "wrapT": 10497}],
+        "buffers": [{"byteLength": len(blob), "uri": uri}],
+        "bufferViews": views,
+        "accessors": accessors,
+    }
+

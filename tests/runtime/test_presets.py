@@ -1,0 +1,408 @@
+"""Texture-set presets: conversions, channel layouts, colour spaces, glTF, atomic writes, CLI."""
+
+import base64
+import json
+import os
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from svbrdf_cli import conventions as cv
+from svbrdf_cli import imageio, mapset, presets
+from svbrdf_cli.cli.main import cli
+from svbrdf_cli.errors import ImageWriteError
+from svbrdf_cli.imageio import read_image
+
+F0 = cv.DIELECTRIC_F0
+METAL = np.array([0.9, 0.6, 0.3], np.float32)
+OPENGL = ("svbrdf", "gltf", "unity-hdrp", "blender")
+
+
+def metalness_forward(colour, m):
+    """export.data.cc0.metalness_to_specular's model, inline (no import from export/)."""
+    return colour * (1.0 - m), F0 + (colour - F0) * m
+
+
+@pytest.fixture
+def maps():
+    """16x16: left half a dielectric (diffuse 0.2, r 0.3), right half a pure metal (r 0.7).
+
+    Normals tilt toward +Y everywhere.
+    """
+    h, w = 16, 16
+    m = np.zeros((h, w, 1), np.float32)
+    m[:, w // 2:] = 1.0
+    colour = np.where(m > 0, METAL, np.float32(0.2)).astype(np.float32)
+    diffuse, specular = metalness_forward(colour, m)
+    rough = np.where(m > 0, 0.7, 0.3).astype(np.float32)
+    normal = np.broadcast_to(cv.normalize(np.array([0.0, 0.5, 1.0])), (h, w, 3)).astype(np.float32)
+    return {"normal": normal, "diffuse": diffuse.astype(np.float32), "roughness": rough,
+            "specular": specular.astype(np.float32)}
+
+
+def read_rgba(path):
+    """A 4-channel data file as stored."""
+    return read_image(path)
+
+
+def left(img):
+    return img[:, :8].reshape(-1, img.shape[-1]).mean(0)
+
+
+def right(img):
+    return img[:, 8:].reshape(-1, img.shape[-1]).mean(0)
+
+
+# --------------------------------------------------------------------------
+# specular -> metallic
+# --------------------------------------------------------------------------
+
+@pytest.mark.parametrize("m", [0.0, 1.0])
+def test_solve_metallic_round_trips_pure_materials(m):
+    colour = np.random.default_rng(1).uniform(0.05, 1.0, (200, 3))
+    diffuse, specular = metalness_forward(colour, m)
+    base, metallic = presets.specular_to_metallic(diffuse, specular)
+    assert metallic.shape == (200, 1)
+    np.testing.assert_allclose(metallic, m, atol=1e-5)
+    np.testing.assert_allclose(base, colour, atol=1e-5)
+
+
+def test_solve_metallic_inverts_its_forward_model_for_grey():
+    # The spec-gloss extension's forward model: diffuse (1 - max(spec)) = base (1 - F0) (1 - m).
+    base = np.linspace(0.1, 1.0, 10)[:, None].repeat(3, 1)
+    m = np.linspace(0.05, 0.95, 10)[:, None]
+    specular = F0 + (base - F0) * m
+    diffuse = base * (1 - F0) * (1 - m) / (1 - specular.max(-1, keepdims=True))
+    b, got = presets.specular_to_metallic(diffuse, specular)
+    np.testing.assert_allclose(got, m, atol=1e-5)
+    np.testing.assert_allclose(b, base, atol=1e-4)
+
+
+def test_dark_dielectric_stays_dielectric_after_quantisation():
+    # 0.04 stored in 8-bit gamma 2.2 and rounded up: the quadratic's other root would say "metal".
+    spec = np.full((1, 3), (round(F0 ** (1 / cv.ALBEDO_GAMMA) * 255) + 0.4) / 255) ** cv.ALBEDO_GAMMA
+    assert F0 < spec[0, 0] < F0 + presets.DIELECTRIC_TOLERANCE
+    base, m = presets.specular_to_metallic(np.full((1, 3), 0.01), spec)
+    assert m[0, 0] == 0.0 and abs(base[0, 0] - 0.01) < 1e-3
+
+
+# --------------------------------------------------------------------------
+# height from normals
+# --------------------------------------------------------------------------
+
+def periodic_height(n=64):
+    p = cv.surface_positions(n, n)
+    x, y = p[..., 0], p[..., 1]   # period 2 = the surface width: tileable
+    return 0.05 * np.sin(np.pi * x) * np.cos(2 * np.pi * y) + 0.03 * np.cos(np.pi * (x + 3 * y)) + 0.02 * np.sin(np.pi * y)
+
+
+def analytic_normals(n=64):
+    p = cv.surface_positions(n, n)
+    x, y = p[..., 0], p[..., 1]
+    dx = 0.05 * np.pi * np.cos(np.pi * x) * np.cos(2 * np.pi * y) - 0.03 * np.pi * np.sin(np.pi * (x + 3 * y))
+    dy = (-0.1 * np.pi * np.sin(np.pi * x) * np.sin(2 * np.pi * y) - 0.09 * np.pi * np.sin(np.pi * (x + 3 * y))
+          + 0.02 * np.pi * np.cos(np.pi * y))
+    return cv.normalize(np.stack([-dx, -dy, np.ones_like(dx)], -1))
+
+
+@pytest.mark.parametrize("tileable", [True, False])
+def test_height_from_analytic_normals(tileable):
+    h = periodic_height()
+    got = presets.normals_to_height(analytic_normals(), tileable=tileable)
+    assert got.shape == h.shape
+    assert np.corrcoef(got.ravel(), h.ravel())[0, 1] > 0.99
+    # the scale is right too: depth recorded for the PNG matches the true relief
+    assert abs(np.ptp(got) / np.ptp(h) - 1) < 0.05
+
+
+def test_height_from_finite_difference_normals():
+    h = periodic_height()
+    px = 2.0 / h.shape[1]
+    dx = (np.roll(h, -1, 1) - np.roll(h, 1, 1)) / (2 * px)
+    dy = -(np.roll(h, -1, 0) - np.roll(h, 1, 0)) / (2 * px)   # row 0 is +Y
+    n = cv.normalize(np.stack([-dx, -dy, np.ones_like(h)], -1))
+    got = presets.normals_to_height(n, tileable=True)
+    assert np.corrcoef(got.ravel(), h.ravel())[0, 1] > 0.99
+
+
+def test_height_of_a_non_tileable_ramp_and_bump():
+    p = cv.surface_positions(64, 64)
+    x, y = p[..., 0], p[..., 1]
+    h = 0.1 * y + 0.05 * np.exp(-((x - 0.3) ** 2 + y ** 2) / 0.1)   # rises toward the top row
+    dx = 0.05 * np.exp(-((x - 0.3) ** 2 + y ** 2) / 0.1) * (-2 * (x - 0.3) / 0.1)
+    dy = 0.1 + 0.05 * np.exp(-((x - 0.3) ** 2 + y ** 2) / 0.1) * (-2 * y / 0.1)
+    n = cv.normalize(np.stack([-dx, -dy, np.ones_like(h)], -1))
+    got = presets.normals_to_height(n)
+    assert np.corrcoef(got.ravel(), h.ravel())[0, 1] > 0.99
+    assert got[0].mean() > got[-1].mean()
+
+
+def test_flat_normals_give_mid_grey_and_zero_depth():
+    unit, depth = presets.height_to_unit(presets.normals_to_height(np.tile([0.0, 0.0, 1.0], (8, 8, 1))))
+    assert depth == 0.0 and np.all(unit == 0.5)
+
+
+# --------------------------------------------------------------------------
+# preset layouts
+# --------------------------------------------------------------------------
+
+def normal_file(preset):
+    return {"svbrdf": "normal.png", "gltf": "normal.png", "unity-hdrp": "Normal.png",
+            "unreal": "Normal.png", "blender": "set_Normal.png"}[preset]
+
+
+@pytest.mark.parametrize("preset", list(presets.PRESETS))
+def test_normal_green_follows_the_engine(maps, tmp_path, preset):
+    out = tmp_path / "set"
+    paths = presets.write_preset(preset, out, maps)
+    assert all(os.path.isfile(p) for p in paths)
+    g = read_image(out / normal_file(preset))[..., 1]
+    if preset in OPENGL:
+        assert g.min() > 0.6
+    else:
+        assert g.max() < 0.4
+
+
+def test_svbrdf_preset_is_exactly_the_native_set(maps, tmp_path):
+    out = tmp_path / "native"
+    paths = presets.write_svbrdf(out, maps, bits=16)
+    assert sorted(os.listdir(out)) == sorted(n + ".png" for n in cv.MAP_NAMES)
+    assert sorted(paths) == sorted(str(out / (n + ".png")) for n in cv.MAP_NAMES)
+    back = mapset.read_map_set(out)
+    for k in cv.MAP_NAMES:
+        np.testing.assert_allclose(back[k], maps[k], atol=2e-3)
+
+
+def test_gltf_layout(maps, tmp_path):
+    out = tmp_path / "g"
+    presets.write_gltf(out, maps)
+    assert sorted(os.listdir(out)) == ["baseColor.png", "height.png", "material.gltf",
+                                       "metallicRoughness.png", "normal.png", "texture_set.json"]
+    base = read_image(out / "baseColor.png")
+    assert abs(left(base) - 0.4845).max() <= 1 / 255          # linear 0.2, sRGB-encoded
+    np.testing.assert_allclose(right(base), cv.linear_to_srgb(METAL), atol=1 / 255)
+    mr = read_image(out / "metallicRoughness.png")
+    assert mr.shape[-1] == 3
+    np.testing.assert_allclose(left(mr), [1.0, 0.3, 0.0], atol=1 / 255)   # G roughness, B metallic
+    np.testing.assert_allclose(right(mr), [1.0, 0.7, 1.0], atol=1 / 255)
+    assert read_image(out / "height.png").shape == (16, 16, 1)
+
+
+def test_unreal_layout(maps, tmp_path):
+    out = tmp_path / "ue"
+    presets.write_unreal(out, maps, bits=16)
+    assert sorted(os.listdir(out)) == ["BaseColor.png", "Height.png", "Normal.png", "ORM.png", "texture_set.json"]
+    orm = read_image(out / "ORM.png")
+    np.testing.assert_allclose(left(orm), [1.0, 0.3, 0.0], atol=1e-3)
+    np.testing.assert_allclose(right(orm), [1.0, 0.7, 1.0], atol=1e-3)
+    assert abs(left(read_image(out / "BaseColor.png")) - 0.4845).max() <= 1 / 255
+    n = read_image(out / "Normal.png")
+    np.testing.assert_allclose(n[0, 0], cv.encode_normals(maps["normal"][0, 0] * [1, -1, 1]), atol=1e-3)
+
+
+def test_unity_hdrp_layout(maps, tmp_path):
+    out = tmp_path / "u"
+    presets.write_unity_hdrp(out, maps)
+    assert sorted(os.listdir(out)) == ["BaseMap.png", "Height.png", "MaskMap.png", "Normal.png", "texture_set.json"]
+    mask = read_rgba(out / "MaskMap.png")
+    assert mask.shape[-1] == 4
+    # R metallic, G AO, B detail mask, A smoothness = 1 - roughness
+    np.testing.assert_allclose(left(mask), [0.0, 1.0, 1.0, 0.7], atol=1 / 255)
+    np.testing.assert_allclose(right(mask), [1.0, 1.0, 1.0, 0.3], atol=1 / 255)
+    assert abs(left(read_image(out / "BaseMap.png")) - 0.4845).max() <= 1 / 255
+
+
+def test_unity_mask_map_keeps_data_under_partial_alpha(tmp_path):
+    # metallic 0.5 with smoothness 0.5: a writer that treats A as opacity would store R = 1.
+    base, m = np.full((4, 4, 3), 0.5), 0.5
+    specular = F0 + (base - F0) * m
+    diffuse = base * (1 - F0) * (1 - m) / (1 - specular.max(-1, keepdims=True))
+    maps = {"normal": np.tile(np.float32([0, 0, 1]), (4, 4, 1)), "diffuse": diffuse.astype(np.float32),
+            "roughness": np.full((4, 4, 1), 0.5, np.float32), "specular": specular.astype(np.float32)}
+    presets.write_unity_hdrp(tmp_path / "u", maps, bits=16)
+    np.testing.assert_allclose(read_rgba(tmp_path / "u" / "MaskMap.png")[0, 0], [0.5, 1, 1, 0.5], atol=1e-4)
+    presets.write_unity_hdrp(tmp_path / "e", maps, fmt="exr")
+    np.testing.assert_allclose(read_rgba(tmp_path / "e" / "MaskMap.exr")[0, 0], [0.5, 1, 1, 0.5], atol=1e-5)
+
+
+def test_blender_layout_and_node_wrangler_names(maps, tmp_path):
+    out = tmp_path / "set"
+    presets.write_blender(out, maps)
+    names = sorted(os.listdir(out))
+    assert names == ["set_BaseColor.png", "set_Height.png", "set_Metallic.png", "set_Normal.png",
+                     "set_Roughness.png", "texture_set.json"]
+    assert abs(left(read_image(out / "set_BaseColor.png")) - 0.4845).max() <= 1 / 255
+    rough, metal = read_image(out / "set_Roughness.png"), read_image(out / "set_Metallic.png")
+    assert rough.shape[-1] == 1 and metal.shape[-1] == 1
+    assert abs(left(rough)[0] - 0.3) <= 1 / 255 and abs(right(metal)[0] - 1.0) <= 1 / 255 and left(metal)[0] == 0
+    # Each file carries exactly one Node Wrangler tag group.
+    groups = {"base": {"base", "color", "basecolor"}, "rough": {"roughness"}, "metal": {"metallic"},
+              "normal": {"normal"}, "height": {"height"}}
+    for name in names[:-1]:
+        hits = [g for g, tags in groups.items() if set(presets._name_components(name)) & tags]
+        assert len(hits) == 1, (name, hits)
+
+
+def test_blender_prefix_avoids_node_wrangler_tags(tmp_path):
+    assert presets.blender_prefix(tmp_path / "oak_planks") == "oak-planks"
+    assert presets.blender_prefix(tmp_path / "RustyMetal") == "material"
+    assert presets.blender_prefix(tmp_path / "tile_2k_rough") == "material"
+
+
+def test_exr_for_linear_data(maps, tmp_path):
+    out = tmp_path / "ue"
+    presets.write_unreal(out, maps, fmt="exr")
+    assert sorted(os.listdir(out)) == ["BaseColor.png", "Height.exr", "Normal.exr", "ORM.exr", "texture_set.json"]
+    orm = read_image(out / "ORM.exr")
+    np.testing.assert_allclose(right(orm), [1.0, 0.7, 1.0], atol=1e-6)
+    with pytest.raises(ValueError, match="PNG only"):
+        presets.write_gltf(tmp_path / "g", maps, fmt="exr")
+
+
+def test_texture_set_json_records_height_depth(tmp_path):
+    h = periodic_height(32)
+    maps = {"normal": analytic_normals(32).astype(np.float32), "diffuse": np.full((32, 32, 3), 0.5, np.float32),
+            "roughness": np.full((32, 32, 1), 0.5, np.float32), "specular": np.full((32, 32, 3), F0, np.float32)}
+    presets.write_unreal(tmp_path / "ue", maps)
+    meta = json.loads((tmp_path / "ue" / "texture_set.json").read_text())
+    assert meta["preset"] == "unreal" and meta["normal_map"].startswith("DirectX")
+    assert meta["height"]["file"] == "Height.png" and meta["files"]["Height.png"]["bits"] == 16
+    assert abs(meta["height"]["depth"] / np.ptp(h) - 1) < 0.1
+    assert meta["files"]["BaseColor.png"]["colour_space"] == "sRGB"
+    assert meta["files"]["ORM.png"]["colour_space"] == "linear"
+
+
+# --------------------------------------------------------------------------
+# glTF document
+# --------------------------------------------------------------------------
+
+def test_gltf_document_is_structurally_valid(maps, tmp_path):
+    out = tmp_path / "g"
+    presets.write_gltf(out, maps)
+    doc = json.loads((out / "material.gltf").read_text())
+    assert doc["asset"]["version"] == "2.0"
+    buf = doc["buffers"][0]
+    prefix = "data:application/octet-stream;base64,"
+    assert buf["uri"].startswith(prefix)
+    blob = base64.b64decode(buf["uri"][len(prefix):])
+    assert len(blob) == buf["byteLength"]
+
+    sizes = {5126: 4, 5123: 2}
+    ncomp = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
+
+    def read(i):
+        acc = doc["accessors"][i]
+        view = doc["bufferViews"][acc["bufferView"]]
+        assert view["byteOffset"] % sizes[acc["componentType"]] == 0
+        assert view["byteOffset"] + view["byteLength"] <= buf["byteLength"]
+        assert view["byteLength"] == acc["count"] * ncomp[acc["type"]] * sizes[acc["componentType"]]
+        dt = "<f4" if acc["componentType"] == 5126 else "<u2"
+        a = np.frombuffer(blob, dt, acc["count"] * ncomp[acc["type"]], view["byteOffset"])
+        return acc, a.reshape(acc["count"], -1)
+
+    prim = doc["meshes"][0]["primitives"][0]
+    assert prim["mode"] == 4 and set(prim["attributes"]) == {"POSITION", "NORMAL", "TANGENT", "TEXCOORD_0"}
+    acc, pos = read(prim["attributes"]["POSITION"])
+    assert acc["count"] == 4 and acc["type"] == "VEC3"
+    assert acc["min"] == pos.min(0).tolist() and acc["max"] == pos.max(0).tolist()
+    assert acc["min"] == [-1, -1, 0] and acc["max"] == [1, 1, 0]
+    for key, n in (("NORMAL", 3), ("TANGENT", 4), ("TEXCOORD_0", 2)):
+        acc, a = read(prim["attributes"][key])
+        assert acc["count"] == 4 and a.shape == (4, n)
+    _, nrm = read(prim["attributes"]["NORMAL"])
+    _, tan = read(prim["attributes"]["TANGENT"])
+    _, uv = read(prim["attributes"]["TEXCOORD_0"])
+    acc, idx = read(prim["indices"])
+    assert acc["type"] == "SCALAR" and acc["count"] == 6 and idx.max() < 4
+    # UV (0, 0) is the image's top-left: the vertex at top-left (-1, +1) in the +Y-up quad
+    top_left = np.argmin(pos[:, 0] - pos[:, 1])
+    assert pos[top_left, :2].tolist() == [-1, 1] and uv[top_left].tolist() == [0, 0]
+    assert np.all(uv[:, 1] == (1 - pos[:, 1]) / 2) and np.all(uv[:, 0] == (pos[:, 0] + 1) / 2)
+    # triangles face +Z (counter-clockwise), the way the normals point
+    for t in idx.reshape(-1, 3):
+        a, b, c = pos[t]
+        assert np.cross(b - a, c - a)[2] > 0
+    assert np.all(nrm == [0, 0, 1])
+    assert np.allclose(np.cross(nrm, tan[:, :3]) * tan[:, 3:], [0, 1, 0])   # bitangent +Y: OpenGL normals
+
+    mat = doc["materials"][prim["material"]]
+    uri = lambda ref: doc["images"][doc["textures"][ref["index"]]["source"]]["uri"]
+    assert uri(mat["pbrMetallicRoughness"]["baseColorTexture"]) == "baseColor.png"
+    assert uri(mat["pbrMetallicRoughness"]["metallicRoughnessTexture"]) == "metallicRoughness.png"
+    assert uri(mat["normalTexture"]) == "normal.png"
+    assert all((out / im["uri"]).is_file() for im in doc["images"])
+    assert doc["nodes"][doc["scenes"][doc["scene"]]["nodes"][0]]["mesh"] == 0
+
+
+# --------------------------------------------------------------------------
+# atomic sets
+# --------------------------------------------------------------------------
+
+def test_refuses_to_overwrite_and_force_replaces(maps, tmp_path):
+    out = tmp_path / "ue"
+    presets.write_unreal(out, maps)
+    with pytest.raises(ImageWriteError, match="already exists"):
+        presets.write_unreal(out, maps)
+    (out / "stale.txt").write_text("old")
+    presets.write_gltf(out, maps, force=True)
+    assert "stale.txt" not in os.listdir(out) and "material.gltf" in os.listdir(out)
+    assert os.listdir(tmp_path) == ["ue"]
+
+
+@pytest.mark.parametrize("preset", list(presets.PRESETS))
+def test_failure_midway_leaves_nothing(maps, tmp_path, monkeypatch, preset):
+    real, calls = imageio.write_image, []
+
+    def flaky(path, pixels, bits=8):
+        calls.append(path)
+        if len(calls) == 2:
+            raise ImageWriteError(f"Could not write '{path}': disk full.")
+        return real(path, pixels, bits=bits)
+
+    monkeypatch.setattr(imageio, "write_image", flaky)
+    monkeypatch.setattr(mapset, "write_image", flaky)
+    with pytest.raises(ImageWriteError):
+        presets.write_preset(preset, tmp_path / "out", maps)
+    assert len(calls) == 2 and os.listdir(tmp_path) == []
+
+
+def test_failure_with_force_keeps_the_old_set(maps, tmp_path, monkeypatch):
+    presets.write_unreal(tmp_path / "ue", maps)
+    before = sorted(os.listdir(tmp_path / "ue"))
+
+    def broken(path, pixels, bits=8):
+        raise ImageWriteError("boom")
+
+    monkeypatch.setattr(imageio, "write_image", broken)
+    with pytest.raises(ImageWriteError):
+        presets.write_unreal(tmp_path / "ue", maps, force=True)
+    assert os.listdir(tmp_path) == ["ue"] and sorted(os.listdir(tmp_path / "ue")) == before
+
+
+# --------------------------------------------------------------------------
+# CLI
+# --------------------------------------------------------------------------
+
+def test_cli_export(maps, tmp_path):
+    mapset.write_map_set(tmp_path / "maps", maps, bits=16)
+    runner, out = CliRunner(), tmp_path / "ue"
+    args = ["export", str(tmp_path / "maps"), "-o", str(out), "--preset", "unreal", "--bits", "16"]
+    res = runner.invoke(cli, args)
+    assert res.exit_code == 0, res.output
+    orm = read_image(out / "ORM.png")
+    np.testing.assert_allclose(right(orm), [1.0, 0.7, 1.0], atol=2e-3)
+    assert read_image(out / "Normal.png")[..., 1].max() < 0.4
+
+    res = runner.invoke(cli, args)
+    assert res.exit_code == 1
+    msg = res.output.strip()
+    assert "\n" not in msg and "already exists" in msg and "--force" in msg and str(out) in msg
+
+    assert runner.invoke(cli, args + ["--force"]).exit_code == 0
+
+    res = runner.invoke(cli, ["export", str(tmp_path / "maps"), "-o", str(tmp_path / "g"), "--preset", "gltf",
+                              "--format", "exr"])
+    assert res.exit_code == 2 and "PNG only" in res.output
+    res = runner.invoke(cli, ["export", str(tmp_path / "nothing"), "-o", str(tmp_path / "x"), "--preset", "gltf"])
+    assert res.exit_code == 1 and "normal.png" in res.output
