@@ -81,6 +81,18 @@ def normal_map_y_sign(normals, height, min_corr=0.1):
     return 0 if not abs(c) >= min_corr else (1 if c > 0 else -1)
 
 
+def _oriented_normals(nmap, height, default_sign, vendor):
+    """Decode a normal map and make it +Y up: the convention measured against
+    ``height`` when it can be, else the vendor's ``default_sign``."""
+    normal = cv.decode_normals(nmap)
+    sign = normal_map_y_sign(normal, height) if height is not None else 0
+    source = "map" if sign else f"map, assumed {vendor} convention"
+    if (sign or default_sign) < 0:
+        normal = normal * np.array([1.0, -1.0, 1.0], dtype=np.float32)
+        source += " (flipped y)"
+    return normal, source
+
+
 def _resize(img, size):
     import cv2
 
@@ -128,12 +140,7 @@ def load_ambientcg(folder, size=None, depth=DEFAULT_DEPTH):
     disp = get("displacement", grey=True)
     nmap = get("normal")
     if nmap is not None:
-        normal = cv.decode_normals(nmap)
-        sign = normal_map_y_sign(normal, disp) if disp is not None else 0
-        source = "map" if sign else "map, assumed ambientCG convention"
-        if (sign or AMBIENTCG_Y_SIGN) < 0:
-            normal = normal * np.array([1.0, -1.0, 1.0], dtype=np.float32)
-            source += " (flipped y)"
+        normal, source = _oriented_normals(nmap, disp, AMBIENTCG_Y_SIGN, "ambientCG")
     elif disp is not None:
         normal = normals_from_height(disp, depth=depth)
         source = "displacement"
@@ -168,12 +175,7 @@ def load_playcanvas(folder, size=None, depth=DEFAULT_DEPTH):
     colour, rough, nmap, height = get("color"), get("roughness", True), get("normal"), get("height", True)
     if colour is None or rough is None or nmap is None:
         raise FileNotFoundError(f"{folder}: needs {name}-color, -roughness and -normal")
-    normal = cv.decode_normals(nmap)
-    sign = normal_map_y_sign(normal, height) if height is not None else 0
-    source = "map" if sign else "map, assumed PlayCanvas convention"
-    if (sign or PLAYCANVAS_Y_SIGN) < 0:
-        normal = normal * np.array([1.0, -1.0, 1.0], dtype=np.float32)
-        source += " (flipped y)"
+    normal, source = _oriented_normals(nmap, height, PLAYCANVAS_Y_SIGN, "PlayCanvas")
     diffuse, specular = metalness_to_specular(cv.srgb_to_linear(colour), np.zeros_like(rough))
     return {"normal": normal.astype(np.float32), "diffuse": diffuse.astype(np.float32),
             "roughness": rough.astype(np.float32), "specular": specular.astype(np.float32),
