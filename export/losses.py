@@ -5,7 +5,8 @@
   0.1 perceptual (Eq. 16). The paper's perceptual features are VGG16
   pool1-3, which cannot be downloaded here: we use the first three scales
   (strides 2, 4, 8) of the ImageNet-pretrained EfficientNet-Lite0 encoder,
-  frozen (:class:`export.nets.lite0.Lite0Features`);
+  frozen (:class:`export.nets.lite0.Lite0Features`), each scale's error
+  relative to the target features' magnitude (see :func:`perceptual_loss`);
 * maps: L1 on the stored encoding + 0.5 rendering loss (Eq. 18): the
   predicted map, with the *ground-truth* other maps, rendered under 9
   random lights and views, against the ground truth rendered the same way
@@ -66,9 +67,17 @@ def critic_loss(critic, real, fake):
 
 
 def perceptual_loss(features, pred, target):
-    """Eq. 16 with ``features`` (a frozen extractor returning a list of maps)."""
+    """Eq. 16 with ``features`` (a frozen extractor returning a list of maps).
+
+    Each scale's L1 is divided by the mean magnitude of the target's
+    features at that scale (detached): Lite0's activations are ~5 on average,
+    so the raw L1 came out 30-80x the image L1 and, even at weight 0.1,
+    drowned it (the networks then ignored overall brightness and colour,
+    which these features barely see). Normalised, the term is a relative
+    feature error of order 0.1-1, beside an image L1 of order 0.05-0.1.
+    """
     fp, ft = features(pred), features(target)
-    return sum(F.l1_loss(a, b) for a, b in zip(fp, ft)) / len(fp)
+    return sum(F.l1_loss(a, b) / b.detach().abs().mean().clamp_min(1e-6) for a, b in zip(fp, ft)) / len(fp)
 
 
 def aux_loss(pred, target, features=None, critic=None):
