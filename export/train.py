@@ -227,6 +227,18 @@ class StageTrainer:
         _, _, pred = self.losses(b, train=False)
         ref = _stored_targets(b) if self.stage == "maps" else b
         out = {f"rmse_{k}": float(((pred[k] - ref[k]) ** 2).mean().sqrt()) for k in pred}
+        # Trivial baselines on the same samples: a network must beat them.
+        for k in pred:
+            if self.stage == "masks":
+                base = torch.zeros_like(ref[k])               # "no mask"
+            elif self.stage == "aux":
+                base = b["photo"]                             # "the input is already it"
+            elif k == "normal":
+                base = torch.full_like(ref[k], 0.5)
+                base[:, 2] = 1.0                              # flat normal
+            else:
+                base = ref[k].mean((0, 2, 3), keepdim=True).expand_as(ref[k])  # the set's mean value
+            out[f"baseline_{k}"] = float(((base - ref[k]) ** 2).mean().sqrt())
         module.train()
         return out
 
