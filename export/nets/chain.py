@@ -90,7 +90,10 @@ class SVBRDFNet(nn.Module):
     def run_maps(self, photo, aux):
         x_n = torch.cat([_centre(photo), photo - aux["I_bf"]], 1)
         x_s = _centre(torch.cat([photo, aux["I_hr"], aux["I_hr2"]], 1))
-        n = cv.normalize(_centre(self.maps["normal"](x_n)), axis=1)
+        # Offset by N_u: an untrained (or uncertain) network gives the flat
+        # normal, and z = 2 * out_z stays >= 0 (normalising a near-zero vector
+        # would give random, often downward, normals with useless gradients).
+        n = cv.normalize(_centre(self.maps["normal"](x_n)) + x_n.new_tensor(cv.FLAT_NORMAL).reshape(1, 3, 1, 1), axis=1)
         ds = self.maps["diffuse_specular"](x_s)
         return {"normal": cv.encode_normals(n), "diffuse": ds[:, :3],
                 "roughness": self.maps["roughness"](x_s), "specular": ds[:, 3:]}

@@ -59,3 +59,12 @@ def test_aux_and_maps_stages_run_and_record_provenance(tmp_path):
     out = net(torch.rand(1, 3, 32, 32))
     for k in ("normal", "diffuse", "roughness", "specular", "M_b", "I_hr2"):
         assert out[k].min() >= 0 and out[k].max() <= 1, k
+
+
+def test_untrained_normal_network_starts_flat():
+    net = SVBRDFNet("fast", pretrained=False).eval()
+    with torch.no_grad():
+        out = net.run_maps(torch.rand(1, 3, 64, 64), {k: torch.rand(1, 3, 64, 64) for k in ("I_bf", "I_hr", "I_hr2")})
+    n = out["normal"] * 2 - 1
+    assert (n[:, 2] > 0).all()
+    assert float(n[:, 2].mean()) > 0.9
