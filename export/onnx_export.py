@@ -1,0 +1,104 @@
+"""Export the trained stages to ONNX for the torch-free runtime.
+
+    python -m export.onnx_export --run runs/fast --out svbrdf_cli/models/fast
+
+One file per stage, each a function of named tensors (NCHW float32, values
+in [0, 1]; maps in their stored encoding, see ``svbrdf_cli.conventions``):
+
+* ``masks.onnx``: photo -> M_b, M_h
+* ``aux.onnx``: photo, M_b, M_h -> I_bf, I_hr, I_hr2
+* ``maps.onnx``: photo, I_bf, I_hr, I_hr2 -> normal, diffuse, roughness, specular
+
+Height and width are dynamic (multiples of :data:`SIZE_MULTIPLE`). Each
+model carries metadata: conventions version, tier, stage, input and output
+names, size multiple and the run's provenance (JSON). The deformable
+convolutions export as the standard ONNX ``DeformConv`` (opset 19).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+
+import click
+import torch
+from torch import nn
+
+from export.nets.chain import STAGES
+from svbrdf_cli import conventions as cv
+
+OPSET = 19
+SIZE_MULTIPLE = 32
+IO = {
+    "masks": (("photo",), ("M_b", "M_h")),
+    "aux": (("photo", "M_b", "M_h"), ("I_bf", "I_hr", "I_hr2")),
+    "maps": (("photo", "I_bf", "I_hr", "I_hr2"), cv.MAP_NAMES),
+}
+
+
+class _Stage(nn.Module):
+    """One stage of an :class:`SVBRDFNet` as a function of positional tensors."""
+
+    def __init__(self, net, stage):
+        super().__init__()
+        self.net, self.stage = net, stage
+
+    def forward(self, *xs):
+        ins, outs = IO[self.stage]
+        named = dict(zip(ins, xs))
+        if self.stage == "masks":
+            out = self.net.run_masks(named["photo"])
+        elif self.stage == "aux":
+            out = self.net.run_aux(named["photo"], named)
+        else:
+            out = self.net.run_maps(named["photo"], named)
+        return tuple(out[k] for k in outs)
+
+
+def export_stage(net, stage, path, size=256, metadata=None):
+    """Write one stage as ONNX; returns the path."""
+    import onnx
+
+    ins, outs = IO[stage]
+    module = _Stage(net.eval(), stage).eval()
+    dummy = tuple(torch.rand(1, 3, size, size) for _ in ins)
+    dyn = {n: {0: "batch", 2: "height", 3: "width"} for n in ins + tuple(outs)}
+    tmp = path + ".part"
+    with torch.no_grad():
+        torch.onnx.export(module, dummy, tmp, input_names=list(ins), output_names=list(outs),
+                          dynamic_axes=dyn, opset_version=OPSET, dynamo=False)
+    model = onnx.load(tmp)
+    meta = {"conventions": cv.CONVENTIONS_VERSION, "stage": stage, "tier": getattr(net, "tier", "custom"),
+            "inputs": ",".join(ins), "outputs": ",".join(outs), "size_multiple": str(SIZE_MULTIPLE),
+            "layout": "NCHW float32 in [0, 1]; maps in the stored encoding"}
+    meta.update({k: v if isinstance(v, str) else json.dumps(v) for k, v in (metadata or {}).items()})
+    for k, v in meta.items():
+        p = model.metadata_props.add()
+        p.key, p.value = k, v
+    onnx.save(model, tmp)
+    os.replace(tmp, path)
+    return path
+
+
+def export_run(run, out, size=256):
+    """Export every stage of a trained run (see :func:`export.train.load_trained`)."""
+    from export.train import _read_json, load_trained
+
+    net = load_trained(run)
+    prov = _read_json(os.path.join(run, "provenance.json"))
+    os.makedirs(out, exist_ok=True)
+    return [export_stage(net, s, os.path.join(out, f"{s}.onnx"), size, {"provenance": prov}) for s in STAGES]
+
+
+@click.command()
+@click.option("--run", type=click.Path(exists=True, file_okay=False), required=True)
+@click.option("--out", type=click.Path(file_okay=False), required=True)
+@click.option("--size", default=256, show_default=True, help="Trace size (the graphs stay size-dynamic).")
+def cli(run, out, size):
+    """Export a trained run's stages to ONNX."""
+    for p in export_run(run, out, size):
+        click.echo(f"{p} ({os.path.getsize(p) / 1e6:.1f} MB)")
+
+
+if __name__ == "__main__":
+    cli()
