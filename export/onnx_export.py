@@ -55,8 +55,8 @@ class _Stage(nn.Module):
         return tuple(out[k] for k in outs)
 
 
-def export_stage(net, stage, path, size=256, metadata=None):
-    """Write one stage as ONNX; returns the path."""
+def export_stage(net, stage, path, size=256, metadata=None, half=False):
+    """Write one stage as ONNX (``half``: float16 weights, see :func:`store_float16`); returns the path."""
     import onnx
 
     ins, outs = IO[stage]
@@ -75,28 +75,61 @@ def export_stage(net, stage, path, size=256, metadata=None):
     for k, v in meta.items():
         p = model.metadata_props.add()
         p.key, p.value = k, v
+    if half:
+        store_float16(model)
+        p = model.metadata_props.add()
+        p.key, p.value = "weights", "float16 (computed in float32)"
     onnx.save(model, tmp)
     os.replace(tmp, path)
     return path
 
 
-def export_run(run, out, size=256):
+def store_float16(model, min_elements=16):
+    """Store float32 weights as float16 and cast them back to float32 at load.
+
+    Halves the file; the arithmetic stays float32 (onnxruntime folds the
+    casts once per session), so the only change is float16 rounding of the
+    weights. Small tensors (biases, shapes) stay float32.
+    """
+    import onnx
+    from onnx import TensorProto, helper, numpy_helper
+
+    graph = model.graph
+    casts = []
+    for i, init in enumerate(list(graph.initializer)):
+        if init.data_type != TensorProto.FLOAT:
+            continue
+        w = numpy_helper.to_array(init)
+        if w.size < min_elements:
+            continue
+        name = init.name  # ``init`` is the stored proto: read its name before replacing it
+        graph.initializer[i].CopyFrom(numpy_helper.from_array(w.astype("float16"), name + "__fp16"))
+        casts.append(helper.make_node("Cast", [name + "__fp16"], [name], to=TensorProto.FLOAT, name=name + "__cast"))
+    nodes = casts + list(graph.node)
+    del graph.node[:]
+    graph.node.extend(nodes)
+    onnx.checker.check_model(model)
+    return model
+
+
+def export_run(run, out, size=256, half=True):
     """Export every stage of a trained run (see :func:`export.train.load_trained`)."""
     from export.train import _read_json, load_trained
 
     net = load_trained(run)
     prov = _read_json(os.path.join(run, "provenance.json"))
     os.makedirs(out, exist_ok=True)
-    return [export_stage(net, s, os.path.join(out, f"{s}.onnx"), size, {"provenance": prov}) for s in STAGES]
+    return [export_stage(net, s, os.path.join(out, f"{s}.onnx"), size, {"provenance": prov}, half) for s in STAGES]
 
 
 @click.command()
 @click.option("--run", type=click.Path(exists=True, file_okay=False), required=True)
 @click.option("--out", type=click.Path(file_okay=False), required=True)
 @click.option("--size", default=256, show_default=True, help="Trace size (the graphs stay size-dynamic).")
-def cli(run, out, size):
+@click.option("--float32", "full", is_flag=True, help="Keep float32 weights (default: float16 storage).")
+def cli(run, out, size, full):
     """Export a trained run's stages to ONNX."""
-    for p in export_run(run, out, size):
+    for p in export_run(run, out, size, half=not full):
         click.echo(f"{p} ({os.path.getsize(p) / 1e6:.1f} MB)")
 
 

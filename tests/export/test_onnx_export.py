@@ -30,3 +30,18 @@ def test_stage_parity_with_onnxruntime(tmp_path, stage):
         assert np.abs(a - b.numpy()).max() < 1e-4, name
     meta = sess.get_modelmeta().custom_metadata_map
     assert meta["stage"] == stage and meta["inputs"] == ",".join(ins) and meta["size_multiple"] == "32"
+
+
+def test_float16_storage_halves_the_file_and_keeps_the_numbers(tmp_path):
+    import os
+
+    torch.manual_seed(0)
+    net = SVBRDFNet(TINY, pretrained=False).eval()
+    full = export_stage(net, "maps", str(tmp_path / "f32.onnx"), size=64)
+    half = export_stage(net, "maps", str(tmp_path / "f16.onnx"), size=64, half=True)
+    assert os.path.getsize(half) < 0.6 * os.path.getsize(full)
+    feeds = {n: np.random.default_rng(i).random((1, 3, 64, 64), dtype=np.float32) for i, n in enumerate(IO["maps"][0])}
+    a = ort.InferenceSession(full, providers=["CPUExecutionProvider"]).run(None, feeds)
+    b = ort.InferenceSession(half, providers=["CPUExecutionProvider"]).run(None, feeds)
+    for x, y in zip(a, b):
+        assert np.abs(x - y).max() < 5e-3
