@@ -45,3 +45,42 @@ def test_float16_storage_halves_the_file_and_keeps_the_numbers(tmp_path):
     b = ort.InferenceSession(half, providers=["CPUExecutionProvider"]).run(None, feeds)
     for x, y in zip(a, b):
         assert np.abs(x - y).max() < 5e-3
+
+
+def test_runtime_chain_matches_torch(tmp_path):
+    """svbrdf_cli.inference.Chain (onnxruntime only) reproduces the torch chain, padding included."""
+    from svbrdf_cli.inference import Chain
+
+    torch.manual_seed(0)
+    net = SVBRDFNet(TINY, pretrained=False).eval()
+    for stage in IO:
+        export_stage(net, stage, str(tmp_path / f"{stage}.onnx"), size=64, half=False)
+    img = np.random.default_rng(3).random((70, 90, 3), dtype=np.float32)  # not a multiple of 32
+    out = Chain(tmp_path)(img)
+    pad = np.pad(img, ((0, 26), (0, 6), (0, 0)), mode="reflect")
+    with torch.no_grad():
+        ref = net(torch.from_numpy(pad.transpose(2, 0, 1).copy())[None])
+    for k, v in out.items():
+        r = ref[k][0].numpy().transpose(1, 2, 0)[:70, :90]
+        assert v.shape == r.shape, k
+        assert np.abs(v - r).max() < 1e-4, k
+
+
+def test_runtime_chain_refuses_other_conventions(tmp_path):
+    import onnx
+
+    from svbrdf_cli.inference import Chain, ModelError
+
+    net = SVBRDFNet(TINY, pretrained=False).eval()
+    for stage in IO:
+        export_stage(net, stage, str(tmp_path / f"{stage}.onnx"), size=64)
+    m = onnx.load(str(tmp_path / "aux.onnx"))
+    for p in m.metadata_props:
+        if p.key == "conventions":
+            p.value = "0"
+    onnx.save(m, str(tmp_path / "aux.onnx"))
+    with pytest.raises(ModelError, match="conventions"):
+        Chain(tmp_path)
+    (tmp_path / "maps.onnx").unlink()
+    with pytest.raises(ModelError, match="maps.onnx"):
+        Chain(tmp_path)

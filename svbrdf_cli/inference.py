@@ -1,0 +1,83 @@
+"""The three-stage inference chain on onnxruntime (no torch).
+
+A model folder holds ``masks.onnx``, ``aux.onnx`` and ``maps.onnx`` as
+written by ``python -m export.onnx_export``; each declares its inputs,
+outputs, size multiple and conventions version in its metadata, and
+:class:`Chain` checks them when it loads.
+
+Images are HWC float32 in [0, 1] (encoded, as the networks were trained);
+the maps come back in their stored encoding (``svbrdf_cli.conventions``),
+HWC, roughness with one channel.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from svbrdf_cli import conventions as cv
+from svbrdf_cli.errors import SvbrdfError
+
+STAGES = ("masks", "aux", "maps")
+
+
+class ModelError(SvbrdfError):
+    """A model folder is missing, incomplete or made for other conventions."""
+
+
+def _session(path, threads):
+    import onnxruntime as ort
+
+    opts = ort.SessionOptions()
+    if threads:
+        opts.intra_op_num_threads = threads
+    providers = [p for p in ("CUDAExecutionProvider", "CPUExecutionProvider") if p in ort.get_available_providers()]
+    return ort.InferenceSession(path, sess_options=opts, providers=providers)
+
+
+class Chain:
+    """masks -> aux -> maps, as trained (see ``export/nets/chain.py``)."""
+
+    def __init__(self, folder, threads=0):
+        self.folder = os.fspath(folder)
+        self.sessions, self.meta = {}, {}
+        missing = [f"{s}.onnx" for s in STAGES if not os.path.isfile(os.path.join(self.folder, f"{s}.onnx"))]
+        if missing:
+            raise ModelError(f"'{self.folder}' has no {', '.join(missing)}; export a trained run with "
+                             "python -m export.onnx_export.")
+        for stage in STAGES:
+            path = os.path.join(self.folder, f"{stage}.onnx")
+            sess = _session(path, threads)
+            meta = sess.get_modelmeta().custom_metadata_map
+            if meta.get("conventions") != cv.CONVENTIONS_VERSION:
+                raise ModelError(f"'{path}' was made for conventions version {meta.get('conventions')!r}, "
+                                 f"this tool uses {cv.CONVENTIONS_VERSION!r}; re-export it.")
+            self.sessions[stage], self.meta[stage] = sess, meta
+        self.multiple = max(int(m.get("size_multiple", "32")) for m in self.meta.values())
+        self.tier = self.meta["maps"].get("tier", "custom")
+
+    def _run(self, stage, feeds):
+        meta = self.meta[stage]
+        outs = meta["outputs"].split(",")
+        res = self.sessions[stage].run(outs, {k: feeds[k] for k in meta["inputs"].split(",")})
+        return dict(zip(outs, res))
+
+    def __call__(self, image):
+        """(H, W, 3) encoded image -> dict of HWC outputs (maps stored, plus masks and aux renderings).
+
+        H and W are padded (by reflection) to the models' size multiple and
+        the outputs cropped back.
+        """
+        img = np.asarray(image, dtype=np.float32)
+        if img.ndim != 3 or img.shape[-1] != 3:
+            raise ValueError(f"expected an (H, W, 3) image, got shape {img.shape}")
+        h, w = img.shape[:2]
+        ph, pw = -h % self.multiple, -w % self.multiple
+        padded = np.pad(img, ((0, ph), (0, pw), (0, 0)), mode="reflect" if (ph < h and pw < w) else "edge")
+        x = np.ascontiguousarray(padded.transpose(2, 0, 1)[None])
+        feeds = {"photo": x}
+        for stage in STAGES:
+            feeds.update(self._run(stage, feeds))
+        names = ("M_b", "M_h", "I_bf", "I_hr", "I_hr2") + cv.MAP_NAMES
+        return {k: np.ascontiguousarray(feeds[k][0].transpose(1, 2, 0)[:h, :w]) for k in names}
