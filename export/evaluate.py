@@ -108,13 +108,20 @@ def score(gt_root, pred_root=None, prefix=""):
     return {k: float(v) for k, v in vals.items()}, line
 
 
-def evaluate(run, des19=None, out=None, modes=MODES, log=print):
-    from export.train import load_trained
-
+def evaluate(run=None, des19=None, out=None, modes=MODES, log=print, onnx=None):
+    """Score a torch run, or (``onnx``: a folder of exported stages) the
+    runtime's onnxruntime chain; the latter has only the ``full`` mode."""
     des19 = des19 or str(shared_root() / "data" / "validation" / "des19")
     if not os.path.isdir(des19):
         raise click.ClickException(f"{des19}: Des19 validation samples not found (set SVBRDF_SHARED)")
-    net = load_trained(run)
+    if onnx:
+        from svbrdf_cli.inference import Chain
+
+        chain, modes = Chain(onnx), ("full",)
+    else:
+        from export.train import load_trained
+
+        net = load_trained(run)
     samples = load_des19(des19)
     out = out or tempfile.mkdtemp(prefix="svbrdf-eval-")
     results = {}
@@ -122,7 +129,11 @@ def evaluate(run, des19=None, out=None, modes=MODES, log=print):
         rel = []
         for name, photo, gt in samples:
             inter = ground_truth_intermediates(photo, gt) if mode != "full" else None
-            pred = predict(net, photo, mode, inter)
+            if onnx:
+                res = chain(photo.permute(1, 2, 0).numpy())
+                pred = {k: torch.from_numpy(res[k]).permute(2, 0, 1) for k in cv.MAP_NAMES}
+            else:
+                pred = predict(net, photo, mode, inter)
             lin = cv.decode_maps({k: pred[k] for k in cv.MAP_NAMES}, axis=0)
             write_map_set(os.path.join(out, mode, name), {k: v.permute(1, 2, 0).numpy() for k, v in lin.items()})
             rel.append(relight_rmse(lin, gt))
@@ -136,17 +147,21 @@ def evaluate(run, des19=None, out=None, modes=MODES, log=print):
 
 
 @click.command()
-@click.option("--run", "run", type=click.Path(exists=True, file_okay=False), required=True,
+@click.option("--run", "run", type=click.Path(exists=True, file_okay=False), default=None,
               help="Run folder holding masks.pt, aux.pt, maps.pt.")
+@click.option("--onnx", type=click.Path(exists=True, file_okay=False), default=None,
+              help="Score exported ONNX stages through the runtime chain instead (full chain only).")
 @click.option("--des19", type=click.Path(file_okay=False), default=None)
 @click.option("--out", type=click.Path(file_okay=False), default=None, help="Where predicted maps go.")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None, help="Write the numbers here too.")
 @click.option("--threads", default=0)
-def cli(run, des19, out, json_out, threads):
-    """Score a trained run on Des19 with the paper's metric."""
+def cli(run, onnx, des19, out, json_out, threads):
+    """Score a trained run (or its ONNX export) on Des19 with the paper's metric."""
+    if not (run or onnx):
+        raise click.UsageError("give --run or --onnx")
     if threads:
         torch.set_num_threads(threads)
-    results = evaluate(run, des19, out, log=click.echo)
+    results = evaluate(run, des19, out, log=click.echo, onnx=onnx)
     if json_out:
         with open(json_out, "w") as f:
             json.dump(results, f, indent=1)
