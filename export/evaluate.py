@@ -34,6 +34,7 @@ import click
 import numpy as np
 import torch
 
+from export.files import shared_root
 from export.render import targets as T
 from export.render.brdf import render
 from svbrdf_cli import conventions as cv
@@ -44,12 +45,6 @@ MODES = ("full", "gt_masks", "gt_aux")
 #: Fixed relighting positions for the re-rendering RMSE (8 around + 1 centre, as in 9-light captures).
 RELIGHT = [(0.0, 0.0, cv.CAMERA_HEIGHT)] + [
     (1.2 * np.cos(a), 1.2 * np.sin(a), cv.CAMERA_HEIGHT) for a in np.linspace(0, 2 * np.pi, 9)[:-1]]
-
-
-def shared_root():
-    from export.data.realism import shared_root as root
-
-    return root()
 
 
 def load_des19(folder):
@@ -123,17 +118,19 @@ def evaluate(run=None, des19=None, out=None, modes=MODES, log=print, onnx=None):
 
         net = load_trained(run)
     samples = load_des19(des19)
+    # Rendered once per sample, shared by the modes that need them (I_hr is the costly part).
+    inter = {name: ground_truth_intermediates(photo, gt) for name, photo, gt in samples} \
+        if any(m != "full" for m in modes) else {}
     out = out or tempfile.mkdtemp(prefix="svbrdf-eval-")
     results = {}
     for mode in modes:
         rel = []
         for name, photo, gt in samples:
-            inter = ground_truth_intermediates(photo, gt) if mode != "full" else None
             if onnx:
                 res = chain(photo.permute(1, 2, 0).numpy())
                 pred = {k: torch.from_numpy(res[k]).permute(2, 0, 1) for k in cv.MAP_NAMES}
             else:
-                pred = predict(net, photo, mode, inter)
+                pred = predict(net, photo, mode, inter.get(name))
             lin = cv.decode_maps({k: pred[k] for k in cv.MAP_NAMES}, axis=0)
             write_map_set(os.path.join(out, mode, name), {k: v.permute(1, 2, 0).numpy() for k, v in lin.items()})
             rel.append(relight_rmse(lin, gt))

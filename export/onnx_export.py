@@ -114,10 +114,11 @@ def store_float16(model, min_elements=16):
 
 def export_run(run, out, size=256, half=True):
     """Export every stage of a trained run (see :func:`export.train.load_trained`)."""
-    from export.train import _read_json, load_trained
+    from export.files import read_json
+    from export.train import load_trained
 
     net = load_trained(run)
-    prov = _read_json(os.path.join(run, "provenance.json"))
+    prov = read_json(os.path.join(run, "provenance.json"))
     os.makedirs(out, exist_ok=True)
     return [export_stage(net, s, os.path.join(out, f"{s}.onnx"), size, {"provenance": prov}, half) for s in STAGES]
 

@@ -22,19 +22,17 @@ validation numbers of every stage.
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import os
 import platform
-import tempfile
 import time
 
 import click
 import torch
-import torch.nn.functional as F
 
 from export import losses as L
 from export.data import dataset as D
+from export.files import atomic_torch_save, read_json, write_json
 from export.nets.chain import STAGES, TIERS, SVBRDFNet
 from svbrdf_cli import conventions as cv
 
@@ -61,27 +59,6 @@ class RunConfig:
     val_samples: int = 16
 
 
-def _atomic_save(obj, path):
-    fd, tmp = tempfile.mkstemp(dir=os.path.dirname(path) or ".", suffix=".part")
-    os.close(fd)
-    torch.save(obj, tmp)
-    os.replace(tmp, path)
-
-
-def _read_json(path):
-    if os.path.exists(path):
-        with open(path) as f:
-            return json.load(f)
-    return {}
-
-
-def _write_json(path, data):
-    fd, tmp = tempfile.mkstemp(dir=os.path.dirname(path) or ".", suffix=".part")
-    with os.fdopen(fd, "w") as f:
-        json.dump(data, f, indent=1)
-    os.replace(tmp, path)
-
-
 def _stored_targets(batch):
     return cv.encode_maps({k: batch[k] for k in cv.MAP_NAMES})
 
@@ -100,6 +77,7 @@ class StageTrainer:
         self.total = None
         self.elapsed = 0.0
         self.history = []
+        self._val_batch = None
         self._load_frozen()
         module = self.net.stage(stage)
         self.net.requires_grad_(False)
@@ -143,7 +121,7 @@ class StageTrainer:
 
     def save(self):
         os.makedirs(self.out, exist_ok=True)
-        _atomic_save(self.state(), self.path)
+        atomic_torch_save(self.state(), self.path)
 
     def resume(self):
         if not os.path.exists(self.path):
@@ -222,8 +200,9 @@ class StageTrainer:
         """Fixed validation samples (same every time): RMSE per output."""
         module = self.net.stage(self.stage)
         module.eval()
-        g = D.worker_generator(VAL_SEED, VAL_STREAM)
-        b = self.batch(g, self.cfg.val_samples)
+        if self._val_batch is None:  # the same samples every time: make them once
+            self._val_batch = self.batch(D.worker_generator(VAL_SEED, VAL_STREAM), self.cfg.val_samples)
+        b = self._val_batch
         _, _, pred = self.losses(b, train=False)
         ref = _stored_targets(b) if self.stage == "maps" else b
         out = {f"rmse_{k}": float(((pred[k] - ref[k]) ** 2).mean().sqrt()) for k in pred}
@@ -295,7 +274,7 @@ def train_stage(stage, out, config, steps=None, minutes=None, resume=True, check
 
 def record_provenance(out, trainer, val):
     path = os.path.join(out, "provenance.json")
-    prov = _read_json(path)
+    prov = read_json(path)
     cfg = trainer.cfg
     prov.setdefault("stages", {})[trainer.stage] = {
         "tier": cfg.tier, "steps": trainer.step, "batch": cfg.batch, "size": cfg.size, "seed": cfg.seed,
@@ -309,12 +288,12 @@ def record_provenance(out, trainer, val):
         "conventions": cv.CONVENTIONS_VERSION, "torch": torch.__version__,
         "finished": time.strftime("%Y-%m-%dT%H:%M:%S"),
     }
-    _write_json(path, prov)
+    write_json(path, prov)
 
 
 def load_trained(out, tier=None, device="cpu", stages=STAGES):
     """An :class:`SVBRDFNet` with the stage weights found in ``out`` (eval mode)."""
-    tier = tier or _read_json(os.path.join(out, "provenance.json")).get("stages", {}).get("masks", {}).get("tier", "fast")
+    tier = tier or read_json(os.path.join(out, "provenance.json")).get("stages", {}).get("masks", {}).get("tier", "fast")
     net = SVBRDFNet(tier, pretrained=False).to(device)
     for s in stages:
         p = os.path.join(out, f"{s}.pt")
@@ -348,10 +327,7 @@ def cli(stage, tier, out, steps, minutes, batch, size, device, seed, threads, fr
     if size % 32:
         raise click.BadParameter("must be a multiple of 32", param_hint="--size")
     out = out or os.path.join("runs", tier)
-    from export.data.realism import shared_root
-
-    root = shared or str(shared_root() / "data")
-    bank = D.SeedBank(root) if os.path.isdir(os.path.join(root, "materials")) else None
+    bank = D.SeedBank.find(shared)
     cfg = RunConfig(tier=tier, size=size, batch=batch, seed=seed, device=device, adversarial=not no_adversarial)
     stages = STAGES if stage == "all" else (stage,)
     for s in stages:

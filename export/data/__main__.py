@@ -16,16 +16,13 @@ def _setup(threads):
 
 
 def _bank(shared, device="cpu"):
-    import os
-
     from export.data.dataset import SeedBank
-    from export.data.realism import shared_root
+    from export.files import shared_data
 
-    root = str(shared or shared_root() / "data")
-    if not os.path.isdir(os.path.join(root, "materials")):
-        click.echo(f"(no CC0 seeds: {root}/materials is absent; procedural materials only)", err=True)
-        return None
-    return SeedBank(root, device=device)
+    bank = SeedBank.find(shared, device=device)
+    if bank is None:
+        click.echo(f"(no CC0 seeds: {shared_data(shared)}/materials is absent; procedural materials only)", err=True)
+    return bank
 
 
 shared_opt = click.option("--shared", type=click.Path(file_okay=False), default=None,
@@ -92,10 +89,10 @@ def shards(out_dir, count, seed, shard_size, size, threads, shared):
     """Write a fixed, reproducible sample set (validation shards)."""
     _setup(threads)
     from export.data import dataset as D
-    from export.data.realism import shared_root
+    from export.files import shared_data
 
     n = D.write_shards(out_dir, count, seed=seed, shard_size=shard_size, config=D.DataConfig(size=size),
-                       seeds_root=str(shared or shared_root() / "data"))
+                       seeds_root=shared_data(shared))
     click.echo(f"{out_dir}: {n} shard(s), {count} samples")
 
 

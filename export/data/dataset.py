@@ -23,16 +23,17 @@ Two ways to deliver them:
 from __future__ import annotations
 
 import dataclasses
+import io
 import json
 import math
 import os
-import tempfile
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 
 from export.data import augment, procedural, simulate
+from export.files import atomic_write, read_json, shared_data, write_json
 from export.render import targets as T
 from svbrdf_cli import conventions as cv
 
@@ -68,6 +69,15 @@ class SeedBank:
 
         self.names, maps = load_seeds(root, size=size)
         self.maps = {k: torch.from_numpy(v).to(device) for k, v in maps.items()}
+
+    @classmethod
+    def find(cls, root=None, size=512, device="cpu"):
+        """The seed bank of the shared data folder (default ``../shared/data``),
+        or ``None`` when it has no ``materials/`` (a user's fresh clone)."""
+        root = shared_data(root)
+        if not os.path.isdir(os.path.join(root, "materials")):
+            return None
+        return cls(root, size=size, device=device)
 
     def __len__(self):
         return len(self.names)
@@ -182,8 +192,8 @@ class FlashPhotos(torch.utils.data.IterableDataset):
     def __iter__(self):
         info = torch.utils.data.get_worker_info()
         g = worker_generator(self.seed, 0 if info is None else info.id + 1, self.device)
-        if self._bank is None and self.seeds_root and os.path.isdir(os.path.join(self.seeds_root, "materials")):
-            self._bank = SeedBank(self.seeds_root, device=self.device)
+        if self._bank is None and self.seeds_root:
+            self._bank = SeedBank.find(self.seeds_root, device=self.device)
         while True:
             b = make_batch(g, self.batch, self.config, self._bank, self.device)
             b.pop("capture")
@@ -223,17 +233,15 @@ def write_shards(out_dir, count, seed=0, shard_size=64, config=DataConfig(), see
     from tqdm import tqdm
 
     os.makedirs(out_dir, exist_ok=True)
-    bank = SeedBank(seeds_root) if seeds_root and os.path.isdir(os.path.join(seeds_root, "materials")) else None
+    bank = SeedBank.find(seeds_root) if seeds_root else None
     manifest = {"count": count, "seed": seed, "shard_size": shard_size, "config": _config_dict(config),
                 "conventions": cv.CONVENTIONS_VERSION, "seeds": bank.names if bank else [],
                 "arrays": {k: "uint8 NCHW; maps in stored encoding" for k in SAMPLE_NAMES}}
     mpath = os.path.join(out_dir, "manifest.json")
-    if os.path.exists(mpath):
-        with open(mpath) as f:
-            old = json.load(f)
-        if old != manifest:
-            raise FileExistsError(f"{out_dir}: holds shards made with other settings; use an empty folder")
-    _atomic_write(mpath, json.dumps(manifest, indent=1).encode())
+    old = read_json(mpath)
+    if old and old != manifest:
+        raise FileExistsError(f"{out_dir}: holds shards made with other settings; use an empty folder")
+    write_json(mpath, manifest)
     n_shards = math.ceil(count / shard_size)
     bar = tqdm(total=count, unit="sample", disable=not progress, desc="shards")
     for i in range(n_shards):
@@ -242,20 +250,12 @@ def write_shards(out_dir, count, seed=0, shard_size=64, config=DataConfig(), see
         if not os.path.exists(path):
             g = worker_generator(seed, 1_000 + i)
             arrays = encode_sample_arrays(make_batch(g, n, config, bank))
-            fd, tmp = tempfile.mkstemp(dir=out_dir, suffix=".npz.part")
-            with os.fdopen(fd, "wb") as f:
-                np.savez_compressed(f, **arrays)
-            os.replace(tmp, path)
+            buf = io.BytesIO()
+            np.savez_compressed(buf, **arrays)
+            atomic_write(path, buf.getvalue())
         bar.update(n)
     bar.close()
     return n_shards
-
-
-def _atomic_write(path, data):
-    fd, tmp = tempfile.mkstemp(dir=os.path.dirname(path) or ".", suffix=".part")
-    with os.fdopen(fd, "wb") as f:
-        f.write(data)
-    os.replace(tmp, path)
 
 
 def _config_dict(config):
@@ -271,7 +271,10 @@ class Shards(torch.utils.data.Dataset):
                             if f.startswith("shard-") and f.endswith(".npz"))
         if not self.files:
             raise FileNotFoundError(f"{folder}: no shard-*.npz files")
-        self._sizes = [int(np.load(f, mmap_mode=None)["photo"].shape[0]) for f in self.files]
+        # Shard sizes from the manifest: reading them from the files would decompress every shard.
+        m = read_json(os.path.join(folder, "manifest.json"))
+        self._sizes = [min(m["shard_size"], m["count"] - int(os.path.basename(f)[6:11]) * m["shard_size"])
+                       for f in self.files]
         self._cache = (None, None)
 
     def __len__(self):

@@ -122,10 +122,10 @@ def make_gallery(output, seed=0, shared=None):
     """
     import cv2
 
-    from export.data.realism import shared_root
+    from export.files import shared_data
 
-    root = shared or str(shared_root() / "data")
-    bank = D.SeedBank(root) if os.path.isdir(os.path.join(root, "materials")) else None
+    root = shared_data(shared)
+    bank = D.SeedBank.find(root)
     cols = generated_columns(seed, bank)
     names = [n for n, _ in cols]
     sheet = _bands([c for _, c in cols], ROWS, names, ["photo", "clean I", "normal", "diffuse", "rough", "spec"])

@@ -33,6 +33,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from export.files import shared_root
+
 #: Real-photo sets under ``<shared>/data/real/``, in the default order.
 REAL_SETS = ("paper_real", "des18_real", "luo2024", "henzler_train")
 #: Sets compared against by default (the CLI's ``--real-sets``).
@@ -277,11 +279,6 @@ def _grid(head, body):
 
 
 # ----------------------------------------------------------------------------- loading
-
-def shared_root() -> Path:
-    """``$SVBRDF_SHARED``, else ``../shared`` beside the checkout (the rule of ``tests/conftest.py``)."""
-    return Path(os.environ.get("SVBRDF_SHARED", Path(__file__).resolve().parents[2].parent / "shared"))
-
 
 def read_photo(path, size=256) -> np.ndarray | None:
     """Read an 8/16-bit image as (size, size, 3) float RGB in [0, 1]: centred square crop, then resize.

@@ -1,0 +1,53 @@
+"""Where the shared reference data is, and atomic file writes, for every export command."""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import tempfile
+from pathlib import Path
+
+
+def shared_root() -> Path:
+    """``$SVBRDF_SHARED``, else ``../shared`` beside the checkout (the rule of ``tests/conftest.py``)."""
+    return Path(os.environ.get("SVBRDF_SHARED", Path(__file__).resolve().parents[1].parent / "shared"))
+
+
+def shared_data(folder=None) -> str:
+    """The shared data folder (holding ``materials/``, ``real/``, ``validation/``):
+    ``folder`` when given, else ``<shared_root>/data``."""
+    return str(folder or shared_root() / "data")
+
+
+def atomic_write(path, data: bytes):
+    """Write ``data`` to ``path`` through a temporary sibling and a rename: never half-written."""
+    fd, tmp = tempfile.mkstemp(dir=os.path.dirname(os.fspath(path)) or ".", suffix=".part")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def atomic_torch_save(obj, path):
+    import torch
+
+    buf = io.BytesIO()
+    torch.save(obj, buf)
+    atomic_write(path, buf.getvalue())
+
+
+def read_json(path):
+    """The JSON object in ``path``, or {} when there is no such file."""
+    if os.path.exists(path):
+        with open(path) as f:
+            return json.load(f)
+    return {}
+
+
+def write_json(path, data):
+    atomic_write(path, json.dumps(data, indent=1).encode())
