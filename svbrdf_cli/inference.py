@@ -13,6 +13,7 @@ HWC, roughness with one channel.
 from __future__ import annotations
 
 import os
+import time
 
 import numpy as np
 
@@ -20,6 +21,10 @@ from svbrdf_cli import conventions as cv
 from svbrdf_cli.errors import SvbrdfError
 
 STAGES = ("masks", "aux", "maps")
+
+#: Shipped model sets live here, one folder per tier.
+MODELS_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "models")
+TIERS = ("fast", "balanced", "best")
 
 
 class ModelError(SvbrdfError):
@@ -34,6 +39,24 @@ def _session(path, threads):
         opts.intra_op_num_threads = threads
     providers = [p for p in ("CUDAExecutionProvider", "CPUExecutionProvider") if p in ort.get_available_providers()]
     return ort.InferenceSession(path, sess_options=opts, providers=providers)
+
+
+def installed_tiers():
+    """Tiers whose three models are in :data:`MODELS_DIR`."""
+    return [t for t in TIERS if all(os.path.isfile(os.path.join(MODELS_DIR, t, f"{s}.onnx")) for s in STAGES)]
+
+
+def model_folder(model):
+    """``--model`` value (a tier name or a folder) -> the folder holding the three ONNX files."""
+    if model in TIERS:
+        if model not in installed_tiers():
+            have = ", ".join(installed_tiers()) or "none"
+            raise ModelError(f"The '{model}' model is not installed (installed: {have}); "
+                             f"use --model {installed_tiers()[0] if installed_tiers() else 'FOLDER'}.")
+        return os.path.join(MODELS_DIR, model)
+    if os.path.isdir(model):
+        return model
+    raise ModelError(f"--model '{model}' is neither a tier ({', '.join(TIERS)}) nor a folder of exported models.")
 
 
 class Chain:
@@ -56,6 +79,7 @@ class Chain:
             self.sessions[stage], self.meta[stage] = sess, meta
         self.multiple = max(int(m.get("size_multiple", "32")) for m in self.meta.values())
         self.tier = self.meta["maps"].get("tier", "custom")
+        self.timings = {}  # seconds of each stage in the last call
 
     def _run(self, stage, feeds):
         meta = self.meta[stage]
@@ -78,6 +102,8 @@ class Chain:
         x = np.ascontiguousarray(padded.transpose(2, 0, 1)[None])
         feeds = {"photo": x}
         for stage in STAGES:
+            t0 = time.perf_counter()
             feeds.update(self._run(stage, feeds))
+            self.timings[stage] = time.perf_counter() - t0
         names = ("M_b", "M_h", "I_bf", "I_hr", "I_hr2") + cv.MAP_NAMES
         return {k: np.ascontiguousarray(feeds[k][0].transpose(1, 2, 0)[:h, :w]) for k in names}

@@ -61,9 +61,14 @@ def load_photo(path, white_balance=None):
     return photo
 
 
+def encode_for_network(linear):
+    """Linear RGB -> the clipped, encoded float32 image the networks take."""
+    return cv.image_to_encoded(np.asarray(linear, np.float32)).astype(np.float32)
+
+
 def network_input(photo, exposure=0.0):
     """Linear photo -> the encoded image the networks take, ``exposure`` in stops."""
-    return cv.image_to_encoded(photo.linear * np.float32(2.0 ** exposure)).astype(np.float32)
+    return encode_for_network(photo.linear * np.float32(2.0 ** exposure))
 
 
 def _load_raw(path):

@@ -251,8 +251,11 @@ def _umask():
     return mask
 
 
-def _write_set(folder, write_files, force):
+def _write_set(folder, write_files, force, extra=None):
     """Run ``write_files(tmp_folder) -> [names]`` and move the result to ``folder``.
+
+    ``extra(tmp_folder) -> [names]``, if given, runs after ``write_files`` and
+    adds files of its own (a capture's preview and record) to the same set.
 
     The files go into a hidden temporary sibling of ``folder``; only when all
     are written is it renamed into place. With ``force`` an existing
@@ -276,6 +279,8 @@ def _write_set(folder, write_files, force):
     old = None
     try:
         names = write_files(tmp)
+        if extra is not None:
+            names = names + extra(tmp)
         os.chmod(tmp, 0o777 & ~_umask())  # mkdtemp makes it 0700
         if os.path.exists(folder):
             old = tmp[: -len(".partial")] + ".old"
@@ -359,7 +364,7 @@ def _check_maps(maps):
 # Presets
 # --------------------------------------------------------------------------
 
-def write_svbrdf(folder, maps, *, bits=8, fmt="png", force=False):
+def write_svbrdf(folder, maps, *, bits=8, fmt="png", force=False, extra=None):
     """Native set: exactly ``normal.png diffuse.png roughness.png specular.png``.
 
     Written by :func:`svbrdf_cli.mapset.write_map_set` in the Des18 encoding
@@ -384,10 +389,10 @@ def write_svbrdf(folder, maps, *, bits=8, fmt="png", force=False):
         mapset.write_map_set(tmp, maps, bits=bits)
         return [n + ".png" for n in cv.MAP_NAMES]
 
-    return _write_set(folder, files, force)
+    return _write_set(folder, files, force, extra)
 
 
-def write_gltf(folder, maps, *, bits=8, fmt="png", force=False):
+def write_gltf(folder, maps, *, bits=8, fmt="png", force=False, extra=None):
     """glTF 2.0 metallic-roughness set plus ``material.gltf`` (one textured quad).
 
     ``baseColor.png`` (sRGB), ``metallicRoughness.png`` (linear; R = 1 (no
@@ -417,10 +422,10 @@ def write_gltf(folder, maps, *, bits=8, fmt="png", force=False):
             out.write("\n")
         return f.finish() + ["material.gltf"]
 
-    return _write_set(folder, files, force)
+    return _write_set(folder, files, force, extra)
 
 
-def write_unreal(folder, maps, *, bits=8, fmt="png", force=False):
+def write_unreal(folder, maps, *, bits=8, fmt="png", force=False, extra=None):
     """Unreal Engine set: ``BaseColor`` (sRGB), ``Normal`` (DirectX), ``ORM``, ``Height``.
 
     ORM is linear (import with sRGB off): R = ambient occlusion (1: none
@@ -443,10 +448,10 @@ def write_unreal(folder, maps, *, bits=8, fmt="png", force=False):
         f.height("Height", maps["normal"])
         return f.finish()
 
-    return _write_set(folder, files, force)
+    return _write_set(folder, files, force, extra)
 
 
-def write_unity_hdrp(folder, maps, *, bits=8, fmt="png", force=False):
+def write_unity_hdrp(folder, maps, *, bits=8, fmt="png", force=False, extra=None):
     """Unity HDRP Lit set: ``BaseMap`` (sRGB), ``MaskMap`` (RGBA), ``Normal``, ``Height``.
 
     MaskMap is linear (import with sRGB off): R = metallic, G = AO (1),
@@ -470,7 +475,7 @@ def write_unity_hdrp(folder, maps, *, bits=8, fmt="png", force=False):
         f.height("Height", maps["normal"])
         return f.finish()
 
-    return _write_set(folder, files, force)
+    return _write_set(folder, files, force, extra)
 
 
 #: Node Wrangler's default Principled Texture Setup tags (see the module docstring).
@@ -500,7 +505,7 @@ def blender_prefix(folder):
     return prefix
 
 
-def write_blender(folder, maps, *, bits=8, fmt="png", force=False):
+def write_blender(folder, maps, *, bits=8, fmt="png", force=False, extra=None):
     """Blender set, named for Node Wrangler's Principled Texture Setup (Ctrl+Shift+T).
 
     ``<name>_BaseColor.png`` (sRGB), ``<name>_Roughness`` and
@@ -526,7 +531,7 @@ def write_blender(folder, maps, *, bits=8, fmt="png", force=False):
         f.height(f"{prefix}_Height", maps["normal"])
         return f.finish()
 
-    return _write_set(folder, files, force)
+    return _write_set(folder, files, force, extra)
 
 
 #: Preset name -> writer.
@@ -537,7 +542,11 @@ PNG_ONLY_PRESETS = ("svbrdf", "gltf")
 
 
 def write_preset(preset, folder, maps, **kwargs):
-    """Write ``maps`` as the texture set ``preset`` (a key of :data:`PRESETS`)."""
+    """Write ``maps`` as the texture set ``preset`` (a key of :data:`PRESETS`).
+
+    Keyword arguments: ``bits``, ``fmt``, ``force`` and ``extra`` (a function
+    of the temporary folder that writes more files into the same atomic set).
+    """
     try:
         writer = PRESETS[preset]
     except KeyError:

@@ -20,7 +20,13 @@ class SvbrdfGroup(click.Group):
             raise click.ClickException(str(e)) from e
 
 
-@click.group(cls=SvbrdfGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=SvbrdfGroup, context_settings={"help_option_names": ["-h", "--help"]}, epilog="""\b
+Examples:
+  svbrdf capture photo.dng -o textures             one photo -> textures/photo/
+  svbrdf batch shoot/ -o textures --preset unreal  a folder, resumable
+  svbrdf export textures/photo -o photo_gltf --preset gltf
+  svbrdf markers sheet.png                         a sheet for --crop markers
+""")
 @click.option("-v", "--verbose", count=True, help="More log output (repeat for more).")
 @click.option("-q", "--quiet", is_flag=True, help="Only errors.")
 @click.version_option(__version__, prog_name="svbrdf")
@@ -33,11 +39,12 @@ def cli(ctx, verbose, quiet):
 
 
 def _register():
+    from svbrdf_cli.cli.capture import batch_cmd, capture_cmd, markers_cmd
     from svbrdf_cli.cli.export import export_cmd
     from svbrdf_cli.cli.render import render_cmd
 
-    cli.add_command(render_cmd)
-    cli.add_command(export_cmd)
+    for cmd in (capture_cmd, batch_cmd, export_cmd, render_cmd, markers_cmd):
+        cli.add_command(cmd)
 
 
 _register()

@@ -1,0 +1,321 @@
+"""One photo in, one texture set out: ingest -> crop -> expose -> infer -> upsample -> write.
+
+:func:`capture` is the whole job for one photo; the CLI's ``capture`` and
+``batch`` commands loop over it. Every output set is written atomically (see
+:mod:`svbrdf_cli.presets`): the preset's files plus ``material.json`` (what
+was done, with which model, how long it took), ``preview.png`` (the maps and
+three relit renders) and, with ``debug``, ``debug/`` (network input, masks and
+auxiliary renderings).
+
+**Resolution.** The networks run at :data:`NETWORK_SIZE` (their training
+and validation resolution). Larger outputs are made by *guided upsampling*
+(:func:`guided_upsample`): each map is modelled locally as a linear function
+of the photo's brightness at network resolution, and those local models are
+applied to the full-resolution photo, so its fine detail (grain, scratches,
+pores) reaches the maps. ``docs/capture.md`` has the measured cost and
+quality against plain bicubic upsampling.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime
+import hashlib
+import json
+import logging
+import os
+import time
+
+import numpy as np
+
+from svbrdf_cli import __version__
+from svbrdf_cli import conventions as cv
+from svbrdf_cli import ingest, rectify
+from svbrdf_cli.errors import SvbrdfError
+
+log = logging.getLogger("svbrdf")
+
+#: The networks' working resolution (trained and validated at it).
+NETWORK_SIZE = 256
+#: Output sizes accepted by ``--size``.
+MIN_SIZE, MAX_SIZE = 256, 4096
+#: Default output size cap: the crop's own resolution, at most this.
+DEFAULT_SIZE = 1024
+#: Guided upsampling: window radius (network pixels) and regularisation.
+GUIDE_RADIUS = 2
+GUIDE_EPS = 1e-3
+#: Marker that a set is complete (the batch command skips such folders).
+RECORD = "material.json"
+
+
+@dataclasses.dataclass
+class Options:
+    """What ``svbrdf capture`` was asked to do (the CLI's options)."""
+
+    preset: str = "svbrdf"
+    crop: str = "auto"
+    corners: tuple | None = None
+    size: int | None = None                    # None: the crop's resolution, capped at DEFAULT_SIZE
+    exposure: float | None = None              # stops; None: auto exposure
+    white_balance: tuple | None = None         # (r, g, b) multipliers
+    upsample: str = "guided"                   # or "bicubic"
+    bits: int = 8
+    fmt: str = "png"
+    debug: bool = False
+    preview: bool = True
+    force: bool = False
+
+
+# --------------------------------------------------------------------------
+# Pieces
+# --------------------------------------------------------------------------
+
+def resize(image, side):
+    """Square image -> ``side`` x ``side`` (area filter down, bicubic up)."""
+    import cv2
+
+    if image.shape[0] == side and image.shape[1] == side:
+        return image
+    interp = cv2.INTER_AREA if side < image.shape[0] else cv2.INTER_CUBIC
+    out = cv2.resize(np.ascontiguousarray(image), (side, side), interpolation=interp)
+    return out[..., None] if out.ndim == 2 else out
+
+
+def auto_exposure_gain(linear, target=cv.AUTO_EXPOSURE_MEAN):
+    """Gain making the encoded image's mean ``target`` (what the networks were trained on)."""
+    lo, hi = -12.0, 12.0
+    flat = linear.reshape(-1, 3)[:: max(1, linear.size // 3 // 65536)]
+    if float(flat.max()) <= 0:
+        raise SvbrdfError("the photo is black")
+    for _ in range(30):
+        mid = (lo + hi) / 2
+        if cv.image_to_encoded(flat * np.float32(2.0 ** mid)).mean() < target:
+            lo = mid
+        else:
+            hi = mid
+    return (lo + hi) / 2
+
+
+def _box(x, r):
+    """Mean over (2r+1)^2 windows, reflecting at the borders; keeps the (h, w, C) shape."""
+    import cv2
+
+    return cv2.boxFilter(x, -1, (2 * r + 1, 2 * r + 1), borderType=cv2.BORDER_REFLECT).reshape(x.shape)
+
+
+def _resize_to(x, shape):
+    import cv2
+
+    return cv2.resize(x, (shape[1], shape[0]), interpolation=cv2.INTER_LINEAR).reshape(*shape, x.shape[-1])
+
+
+def guided_upsample(low, guide_low, guide_high, radius=GUIDE_RADIUS, eps=GUIDE_EPS):
+    """Joint upsampling with a guided filter (He & Sun, "Fast guided filter", 2015).
+
+    Args:
+        low: (h, w, C) map at network resolution.
+        guide_low: (h, w) guide (the photo's encoded brightness) at that resolution.
+        guide_high: (H, W) the same guide at the output resolution.
+
+    Returns:
+        (H, W, C): per-pixel ``a * guide_high + b`` with (a, b) fitted in
+        (2r+1)^2 windows at low resolution and upsampled bilinearly.
+    """
+    low = np.ascontiguousarray(low, np.float32)
+    g = np.ascontiguousarray(guide_low, np.float32)[..., None]
+    mean_g = _box(g, radius)
+    var_g = _box(g * g, radius) - mean_g ** 2
+    mean_p = _box(low, radius)
+    cov = _box(np.ascontiguousarray(g * low), radius) - mean_g * mean_p
+    a = cov / (var_g + eps)
+    b = mean_p - a * mean_g
+    a, b = _box(np.ascontiguousarray(a), radius), _box(np.ascontiguousarray(b), radius)
+    return _resize_to(a, guide_high.shape) * guide_high[..., None] + _resize_to(b, guide_high.shape)
+
+
+def upsample_maps(stored, photo_low, photo_high, method="guided"):
+    """Stored-encoding maps at network resolution -> the output resolution.
+
+    ``photo_low`` / ``photo_high``: the encoded network input and the encoded
+    crop at the output size.
+    """
+    side = photo_high.shape[0]
+    if stored["normal"].shape[0] == side:
+        return dict(stored)
+    out = {}
+    if method == "guided":
+        lum = np.array([0.2126, 0.7152, 0.0722], np.float32)
+        gl, gh = photo_low @ lum, photo_high @ lum
+        for k, v in stored.items():
+            out[k] = guided_upsample(v, gl, gh)
+    elif method == "bicubic":
+        out = {k: resize(v, side) for k, v in stored.items()}
+    else:
+        raise ValueError(f"unknown upsampling method {method!r}")
+    n = out["normal"] * 2.0 - 1.0
+    n[..., 2] = np.maximum(n[..., 2], 1e-3)  # stay in the upper hemisphere
+    out["normal"] = cv.encode_normals(cv.normalize(n))
+    return {k: v.clip(0.0, 1.0).astype(np.float32) for k, v in out.items()}
+
+
+def output_size(opts, crop_side):
+    if opts.size is not None:
+        return int(opts.size)
+    return int(min(DEFAULT_SIZE, max(MIN_SIZE, crop_side)))
+
+
+#: Lights of the preview's relit renders (surface units; the surface spans -1..1).
+PREVIEW_LIGHTS = {"flash": cv.FLASH_POSITION, "left": (-2.0, 0.5, 1.2), "top right": (1.5, 1.5, 1.5)}
+
+
+def preview_image(network_input, stored, tile=256):
+    """4 x 2 grid: photo, normal, diffuse, roughness / specular and three relit renders."""
+    import cv2
+
+    from svbrdf_cli.mapset import stored_to_linear
+    from svbrdf_cli.shading import render_maps
+
+    small = {k: resize(v, tile) for k, v in stored.items()}
+    lin = stored_to_linear(small)
+    tiles = [("photo", resize(network_input, tile)), ("normal", small["normal"]), ("diffuse", small["diffuse"]),
+             ("roughness", np.repeat(small["roughness"][..., :1], 3, -1)), ("specular", small["specular"])]
+    for name, light in PREVIEW_LIGHTS.items():
+        img = render_maps({k: v.astype(np.float64) for k, v in lin.items()}, light=light)
+        tiles.append((f"relit: {name}", cv.image_to_encoded(img).astype(np.float32)))
+    grid = np.zeros((2 * tile, 4 * tile, 3), np.float32)
+    for i, (name, img) in enumerate(tiles):
+        r, c = divmod(i, 4)
+        t = np.ascontiguousarray((img.clip(0, 1) * 255 + 0.5).astype(np.uint8))
+        cv2.putText(t, name, (5, tile - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 0), 2, cv2.LINE_AA)
+        cv2.putText(t, name, (5, tile - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1, cv2.LINE_AA)
+        grid[r * tile:(r + 1) * tile, c * tile:(c + 1) * tile] = t / np.float32(255)
+    return grid
+
+
+def file_sha256(path):
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def output_folder(out_root, photo_path):
+    """``OUT/<photo stem>``: the contract benchmarks rely on."""
+    return os.path.join(os.fspath(out_root), os.path.splitext(os.path.basename(os.fspath(photo_path)))[0])
+
+
+def is_complete(folder):
+    """A finished set: the folder exists and holds its ``material.json`` (written last, in the same rename)."""
+    return os.path.isfile(os.path.join(folder, RECORD))
+
+
+# --------------------------------------------------------------------------
+# The job
+# --------------------------------------------------------------------------
+
+@dataclasses.dataclass
+class Prepared:
+    """A photo read, cropped and exposed: ready for the networks."""
+
+    path: str
+    photo: ingest.Photo
+    crop: rectify.Crop
+    gain_ev: float
+    timings: dict
+
+
+def prepare(path, opts):
+    """Read, crop and expose one photo (the part that needs no model)."""
+    t0 = time.perf_counter()
+    photo = ingest.load_photo(path, white_balance=opts.white_balance)
+    t1 = time.perf_counter()
+    try:
+        c = rectify.crop(photo.linear, opts.crop, opts.corners)
+    except rectify.CropError as e:
+        raise rectify.CropError(f"Could not crop '{path}': {e}.") from None
+    if c.image.shape[0] < 64:
+        raise rectify.CropError(f"Could not crop '{path}': the crop is only {c.image.shape[0]} px wide; "
+                                "use a larger region or a sharper photo.")
+    small = resize(c.image, NETWORK_SIZE)
+    gain = opts.exposure if opts.exposure is not None else auto_exposure_gain(small)
+    t2 = time.perf_counter()
+    return Prepared(os.fspath(path), photo, c, float(gain), {"read": t1 - t0, "crop": t2 - t1})
+
+
+def capture(prepared, chain, out_root, opts, model_name="fast"):
+    """Infer and write the texture set of a :class:`Prepared` photo; returns (folder, record)."""
+    from svbrdf_cli.imageio import write_image
+    from svbrdf_cli.mapset import stored_to_linear
+    from svbrdf_cli.presets import write_preset
+
+    p = prepared
+    folder = output_folder(out_root, p.path)
+    timings = dict(p.timings)
+    gain = np.float32(2.0 ** p.gain_ev)
+    t0 = time.perf_counter()
+    net_in = ingest.encode_for_network(resize(p.crop.image, NETWORK_SIZE) * gain)
+    out = chain(net_in)
+    timings.update({f"network_{k}": v for k, v in chain.timings.items()})
+    t1 = time.perf_counter()
+    side = output_size(opts, p.crop.image.shape[0])
+    stored = {k: out[k] for k in cv.MAP_NAMES}
+    high = ingest.encode_for_network(resize(p.crop.image, side) * gain) if side != NETWORK_SIZE else net_in
+    stored = upsample_maps(stored, net_in, high, opts.upsample)
+    for k, v in stored.items():
+        if not np.isfinite(v).all():
+            raise SvbrdfError(f"The model produced non-finite values for '{p.path}' ({k}); please report this photo.")
+    maps = stored_to_linear(stored)
+    t2 = time.perf_counter()
+    timings["upsample"] = t2 - t1
+    timings["network"] = t1 - t0
+
+    record = {
+        "tool": f"svbrdf {__version__}",
+        "conventions_version": cv.CONVENTIONS_VERSION,
+        "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "input": {"file": os.path.abspath(p.path), "sha256": file_sha256(p.path), "kind": p.photo.kind,
+                  "bits": p.photo.bits, "width": int(p.photo.linear.shape[1]), "height": int(p.photo.linear.shape[0])},
+        "model": {"name": model_name, "tier": chain.tier, "folder": os.path.abspath(chain.folder)},
+        "crop": _jsonable(p.crop.report),
+        "exposure": {"mode": "auto" if opts.exposure is None else "manual", "stops": round(p.gain_ev, 3)},
+        "white_balance": list(opts.white_balance) if opts.white_balance else None,
+        "network_size": NETWORK_SIZE, "size": side,
+        "upsampling": opts.upsample if side != NETWORK_SIZE else None,
+        "preset": opts.preset, "bits": opts.bits, "format": opts.fmt,
+    }
+
+    def extra(tmp):
+        names = []
+        if opts.preview:
+            write_image(os.path.join(tmp, "preview.png"), preview_image(net_in, stored))
+            names.append("preview.png")
+        if opts.debug:
+            os.makedirs(os.path.join(tmp, "debug"))
+            debug = {"input": net_in, **{k: out[k] for k in ("M_b", "M_h", "I_bf", "I_hr", "I_hr2")}}
+            for k, v in debug.items():
+                write_image(os.path.join(tmp, "debug", f"{k}.png"), v)
+                names.append(f"debug/{k}.png")
+        timings["write"] = time.perf_counter() - t2
+        files = sorted(os.path.relpath(os.path.join(d, n), tmp).replace(os.sep, "/")
+                       for d, _, ns in os.walk(tmp) for n in ns)
+        rec = dict(record, files=files + [RECORD],
+                   timings_s={k: round(v, 4) for k, v in timings.items()})
+        with open(os.path.join(tmp, RECORD), "w") as f:
+            json.dump(rec, f, indent=2)
+            f.write("\n")
+        record.update(rec)
+        return names + [RECORD]
+
+    write_preset(opts.preset, folder, maps, bits=opts.bits, fmt=opts.fmt, force=opts.force, extra=extra)
+    return folder, record
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {k: _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, (np.floating, np.integer)):
+        return x.item()
+    return x
