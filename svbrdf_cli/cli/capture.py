@@ -93,6 +93,8 @@ def capture_options(f):
         click.option("--threads", type=click.IntRange(0, 256), default=0,
                      help="onnxruntime threads (0: one per core)."),
         click.option("--force", is_flag=True, help="Redo and replace existing texture sets."),
+        click.option("-q", "--quiet", is_flag=True, help="Only errors (same as 'svbrdf -q')."),
+        click.option("-v", "--verbose", count=True, help="More log output (same as 'svbrdf -v')."),
     ]
     for o in reversed(opts):
         f = o(f)
@@ -138,7 +140,7 @@ def run_inputs(files, output, opts, model, threads, skip_done, quiet):
     from svbrdf_cli.inference import Chain, model_folder
 
     def err(msg):
-        click.echo(f"error: {msg}", err=True)
+        tqdm.write(f"error: {msg}", file=sys.stderr)  # above the progress bar, never inside it
 
     # Same output folder for two inputs (photo.jpg, photo.dng): the second would clobber the first.
     seen, todo, failed, skipped = {}, [], 0, 0
@@ -197,7 +199,7 @@ def run_inputs(files, output, opts, model, threads, skip_done, quiet):
                     msg = (f"{f} -> {folder} ({record['size']}x{record['size']}, crop {how}, "
                            f"{time.perf_counter() - t0:.1f} s)")
                     if not quiet:
-                        (bar.write(msg, file=sys.stderr) if len(todo) > 1 else click.echo(msg, err=True))
+                        tqdm.write(msg, file=sys.stderr)
                 except Exception as e:  # noqa: BLE001
                     report_failure(f, e)
             bar.update(1)
@@ -211,6 +213,15 @@ def _finish(done, skipped, failed, ignored, quiet):
                 ([f"{failed} failed"] if failed else []) + ([f"{ignored} non-photo files ignored"] if ignored else [])
         click.echo(", ".join(parts), err=True)
     sys.exit(1 if failed else 0)
+
+
+def _quiet(ctx, quiet, verbose):
+    """-q/-v given after the sub-command work like the group's."""
+    quiet = quiet or ctx.obj.get("quiet", False)
+    verbose = max(verbose, ctx.obj.get("verbose", 0))
+    level = logging.ERROR if quiet else (logging.WARNING, logging.INFO, logging.DEBUG)[min(verbose, 2)]
+    logging.getLogger().setLevel(level)
+    return quiet
 
 
 def _options(preset, crop, corners, size, exposure, white_balance, upsample, bits, fmt, debug, no_preview, force):
@@ -229,7 +240,7 @@ def _options(preset, crop, corners, size, exposure, white_balance, upsample, bit
 @capture_options
 @click.pass_context
 def capture_cmd(ctx, inputs, output, model, preset, crop, corners, size, exposure, white_balance, upsample,
-                bits, fmt, debug, no_preview, threads, force):
+                bits, fmt, debug, no_preview, threads, force, quiet, verbose):
     """Turn flash photos into PBR texture sets.
 
     INPUTS are photos (JPEG, PNG, TIFF, EXR, camera RAW such as DNG, NEF, CR2,
@@ -249,7 +260,7 @@ def capture_cmd(ctx, inputs, output, model, preset, crop, corners, size, exposur
     files, ignored = collect_inputs(inputs)
     if not files:
         raise click.UsageError("no photos found in " + ", ".join(f"'{p}'" for p in inputs) + ".")
-    quiet = ctx.obj.get("quiet", False)
+    quiet = _quiet(ctx, quiet, verbose)
     _finish(*run_inputs(files, output, opts, model, threads, skip_done=False, quiet=quiet), ignored, quiet)
 
 
@@ -258,7 +269,7 @@ def capture_cmd(ctx, inputs, output, model, preset, crop, corners, size, exposur
 @capture_options
 @click.pass_context
 def batch_cmd(ctx, folder, output, model, preset, crop, corners, size, exposure, white_balance, upsample,
-              bits, fmt, debug, no_preview, threads, force):
+              bits, fmt, debug, no_preview, threads, force, quiet, verbose):
     """Convert every photo in FOLDER; rerun to resume.
 
     Photos whose texture set is already complete in OUTPUT are skipped (so an
@@ -273,7 +284,7 @@ def batch_cmd(ctx, folder, output, model, preset, crop, corners, size, exposure,
     """
     opts = _options(preset, crop, corners, size, exposure, white_balance, upsample, bits, fmt, debug, no_preview, force)
     files, ignored = collect_inputs([folder])
-    quiet = ctx.obj.get("quiet", False)
+    quiet = _quiet(ctx, quiet, verbose)
     if not files:
         raise click.UsageError(f"no photos in '{folder}' (looked for {', '.join(sorted(PHOTO_EXTENSIONS))} and RAW files).")
     _finish(*run_inputs(files, output, opts, model, threads, skip_done=True, quiet=quiet), ignored, quiet)
