@@ -9,10 +9,10 @@ auxiliary renderings).
 
 **Resolution.** The networks run at :data:`NETWORK_SIZE` (their training
 and validation resolution). Larger outputs are made by *guided upsampling*
-(:func:`guided_upsample`): each map is modelled locally as a linear function
-of the photo's brightness at network resolution, and those local models are
-applied to the full-resolution photo, so its fine detail (grain, scratches,
-pores) reaches the maps. ``docs/capture.md`` has the measured cost and
+(:func:`guided_upsample`): the normal and diffuse maps are regressed locally
+on the photo's brightness at network resolution, and the full-resolution
+photo's fine detail (grain, scratches, pores) is added to their bicubic
+upsampling in that proportion. ``docs/capture.md`` has the measured cost and
 quality against plain bicubic upsampling.
 """
 
@@ -42,7 +42,7 @@ MIN_SIZE, MAX_SIZE = 256, 4096
 #: Default output size cap: the crop's own resolution, at most this.
 DEFAULT_SIZE = 1024
 #: Guided upsampling: window radius (network pixels) and regularisation.
-GUIDE_RADIUS = 2
+GUIDE_RADIUS = 1
 GUIDE_EPS = 1e-3
 #: Marker that a set is complete (the batch command skips such folders).
 RECORD = "material.json"
@@ -110,48 +110,59 @@ def _resize_to(x, shape):
 
 
 def guided_upsample(low, guide_low, guide_high, radius=GUIDE_RADIUS, eps=GUIDE_EPS):
-    """Joint upsampling with a guided filter (He & Sun, "Fast guided filter", 2015).
+    """Bicubic upsampling plus the photo's own fine detail, scaled by a local regression.
+
+    In each (2r+1)^2 window at network resolution the map is regressed on
+    the guide (slope ``a = cov(guide, map) / (var(guide) + eps)``, as in He
+    et al.'s guided filter); the upsampled map then gains ``a`` times the
+    guide's detail that the low resolution could not hold
+    (``guide_high - upsample(guide_low)``). Where the map does not follow
+    the photo's brightness, ``a`` is ~0 and this is plain bicubic.
 
     Args:
         low: (h, w, C) map at network resolution.
         guide_low: (h, w) guide (the photo's encoded brightness) at that resolution.
-        guide_high: (H, W) the same guide at the output resolution.
+        guide_high: (H, W) the same guide at the output resolution (square).
 
     Returns:
-        (H, W, C): per-pixel ``a * guide_high + b`` with (a, b) fitted in
-        (2r+1)^2 windows at low resolution and upsampled bilinearly.
+        (H, W, C) float32.
     """
     low = np.ascontiguousarray(low, np.float32)
     g = np.ascontiguousarray(guide_low, np.float32)[..., None]
     mean_g = _box(g, radius)
     var_g = _box(g * g, radius) - mean_g ** 2
-    mean_p = _box(low, radius)
-    cov = _box(np.ascontiguousarray(g * low), radius) - mean_g * mean_p
-    a = cov / (var_g + eps)
-    b = mean_p - a * mean_g
-    a, b = _box(np.ascontiguousarray(a), radius), _box(np.ascontiguousarray(b), radius)
-    return _resize_to(a, guide_high.shape) * guide_high[..., None] + _resize_to(b, guide_high.shape)
+    cov = _box(np.ascontiguousarray(g * low), radius) - mean_g * _box(low, radius)
+    a = _box(np.ascontiguousarray(cov / (var_g + eps)), radius)
+    side = guide_high.shape[0]
+    detail = guide_high - resize(g, side)[..., 0]
+    return resize(low, side).reshape(side, side, -1) + _resize_to(a, guide_high.shape) * detail[..., None]
+
+
+#: Maps that take the photo's detail in guided upsampling; the others are
+#: bicubic (measured: ``python -m export.upsample_eval``, docs/capture.md).
+GUIDED_MAPS = ("normal", "diffuse")
 
 
 def upsample_maps(stored, photo_low, photo_high, method="guided"):
     """Stored-encoding maps at network resolution -> the output resolution.
 
     ``photo_low`` / ``photo_high``: the encoded network input and the encoded
-    crop at the output size.
+    crop at the output size. ``method``: "guided" (:func:`guided_upsample`
+    for :data:`GUIDED_MAPS`, bicubic for the rest) or "bicubic".
     """
     side = photo_high.shape[0]
     if stored["normal"].shape[0] == side:
         return dict(stored)
-    out = {}
-    if method == "guided":
-        lum = np.array([0.2126, 0.7152, 0.0722], np.float32)
-        gl, gh = photo_low @ lum, photo_high @ lum
-        for k, v in stored.items():
-            out[k] = guided_upsample(v, gl, gh)
-    elif method == "bicubic":
-        out = {k: resize(v, side) for k, v in stored.items()}
-    else:
+    if method not in ("guided", "bicubic"):
         raise ValueError(f"unknown upsampling method {method!r}")
+    lum = np.array([0.2126, 0.7152, 0.0722], np.float32)
+    gl, gh = photo_low @ lum, photo_high @ lum
+    out = {}
+    for k, v in stored.items():
+        if method == "guided" and k in GUIDED_MAPS:
+            out[k] = guided_upsample(v, gl, gh)
+        else:
+            out[k] = resize(v, side).reshape(side, side, -1)
     n = out["normal"] * 2.0 - 1.0
     n[..., 2] = np.maximum(n[..., 2], 1e-3)  # stay in the upper hemisphere
     out["normal"] = cv.encode_normals(cv.normalize(n))

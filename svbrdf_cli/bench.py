@@ -1,0 +1,142 @@
+"""Capture benchmark: seconds per photo by stage, and peak memory, at several output sizes.
+
+    python -m svbrdf_cli.bench                       # 256, 1024, 2048 from a 12 MP JPEG
+    python -m svbrdf_cli.bench --sizes 256,4096 --repeat 5 --photo my.dng
+
+Each configuration runs in its own process (so peak memory is its own):
+the photo is read, cropped, exposed, run through the model chain,
+upsampled and written as a native texture set with its preview, ``--repeat``
+times; the median of each stage is printed. In the same run, as baselines,
+the networks alone at 256 px and the same job with bicubic instead of guided
+upsampling, so ratios hold on any machine.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+import click
+
+STAGE_ORDER = ("read", "crop", "network_masks", "network_aux", "network_maps", "upsample", "write")
+
+
+def _synthetic_photo(path, width=4000, height=3000):
+    """A 12 MP flash-like JPEG (textured, with a highlight), written once."""
+    import numpy as np
+
+    from svbrdf_cli import conventions as cv
+    from svbrdf_cli.imageio import write_image
+
+    rng = np.random.default_rng(0)
+    y, x = np.mgrid[0:height, 0:width].astype(np.float32)
+    tex = 0.25 + 0.1 * np.sin(x / 23.0) * np.cos(y / 17.0) + 0.05 * rng.standard_normal((height, width)).astype(np.float32)
+    hl = np.exp(-((x - width / 2) ** 2 + (y - height / 2) ** 2) / (2 * (0.05 * width) ** 2))
+    lin = np.clip(tex[..., None] * np.array([0.9, 0.7, 0.5], np.float32) + 0.8 * hl[..., None], 0, 1)
+    write_image(path, cv.linear_to_srgb(lin).astype(np.float32))
+
+
+def _one(photo, size, repeat, upsample, model, threads):
+    """In this process: run the job ``repeat`` times; returns timings and peak memory."""
+    from svbrdf_cli import capture as C
+    from svbrdf_cli.inference import Chain, model_folder
+
+    chain = Chain(model_folder(model), threads=threads)
+    opts = C.Options(size=size, upsample=upsample, force=True)
+    runs = []
+    with tempfile.TemporaryDirectory() as out:
+        for _ in range(repeat + 1):  # the first run warms up onnxruntime
+            t0 = time.perf_counter()
+            prepared = C.prepare(photo, opts)
+            _, rec = C.capture(prepared, chain, out, opts)
+            t = dict(rec["timings_s"], total=time.perf_counter() - t0)
+            runs.append(t)
+    runs = runs[1:]
+    med = {k: statistics.median(r[k] for r in runs) for k in runs[0]}
+    return {"timings": med, "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
+
+
+def _networks_only(model, threads, repeat):
+    import numpy as np
+
+    from svbrdf_cli.inference import Chain, model_folder
+
+    chain = Chain(model_folder(model), threads=threads)
+    x = np.random.default_rng(0).uniform(0, 1, (256, 256, 3)).astype(np.float32)
+    chain(x)
+    ts = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        chain(x)
+        ts.append(time.perf_counter() - t0)
+    return {"timings": {"total": statistics.median(ts)},
+            "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
+
+
+def _spawn(args):
+    r = subprocess.run([sys.executable, "-m", "svbrdf_cli.bench", "--child", json.dumps(args)],
+                       capture_output=True, text=True)
+    if r.returncode:
+        raise click.ClickException(f"benchmark child failed: {r.stderr.strip().splitlines()[-1:]}")
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
+@click.command()
+@click.option("--photo", type=click.Path(exists=True, dir_okay=False), default=None,
+              help="Photo to run on (default: a synthetic 4000x3000 JPEG).")
+@click.option("--sizes", default="256,1024,2048", show_default=True, help="Output sizes (comma-separated).")
+@click.option("--repeat", default=3, show_default=True, help="Timed runs per configuration (median).")
+@click.option("--model", default="fast", show_default=True)
+@click.option("--threads", default=0, help="onnxruntime threads (0: one per core).")
+@click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None, help="Also write the figures here.")
+@click.option("--child", default=None, hidden=True)
+def cli(photo, sizes, repeat, model, threads, json_out, child):
+    """Time the capture job by stage at several output sizes, with peak memory."""
+    if child:
+        a = json.loads(child)
+        res = _networks_only(a["model"], a["threads"], a["repeat"]) if a["photo"] is None else \
+            _one(a["photo"], a["size"], a["repeat"], a["upsample"], a["model"], a["threads"])
+        print(json.dumps(res))
+        return
+    sizes = [int(s) for s in sizes.split(",")]
+    with tempfile.TemporaryDirectory() as tmp:
+        if photo is None:
+            photo = os.path.join(tmp, "photo_12mp.jpg")
+            _synthetic_photo(photo)
+        from svbrdf_cli.ingest import load_photo
+
+        h, w = load_photo(photo).linear.shape[:2]
+        click.echo(f"photo: {os.path.basename(photo)} {w}x{h}; model {model}; {os.cpu_count()} cores; "
+                   f"median of {repeat} runs after one warm-up; each row in its own process")
+        base = _spawn({"photo": None, "model": model, "threads": threads, "repeat": max(repeat, 5)})
+        rows = []
+        for size in sizes:
+            for up in (("guided", "bicubic") if size > 256 else ("guided",)):
+                r = _spawn({"photo": photo, "size": size, "upsample": up, "model": model, "threads": threads,
+                            "repeat": repeat})
+                rows.append((size, up, r))
+    t_net = base["timings"]["total"]
+    head = ["size", "upsampling"] + list(STAGE_ORDER) + ["total s", "x networks", "peak MB"]
+    click.echo("| " + " | ".join(head) + " |")
+    click.echo("|" + "---|" * len(head))
+    click.echo(f"| 256 | networks alone | " + " | ".join("" for _ in STAGE_ORDER)
+               + f" | {t_net:.3f} | 1.0 | {base['peak_rss_mb']:.0f} |")
+    for size, up, r in rows:
+        t = r["timings"]
+        cells = [f"{t.get(k, 0):.3f}" for k in STAGE_ORDER]
+        click.echo(f"| {size} | {up} | " + " | ".join(cells) + f" | {t['total']:.3f} | {t['total'] / t_net:.1f} | "
+                   f"{r['peak_rss_mb']:.0f} |")
+    if json_out:
+        with open(json_out, "w") as f:
+            json.dump({"photo": [w, h], "networks_alone": base,
+                       "rows": [{"size": s, "upsample": u, **r} for s, u, r in rows]}, f, indent=2)
+
+
+if __name__ == "__main__":
+    cli()
