@@ -217,3 +217,17 @@ def test_marker_capture_end_to_end(tmp_path):
     assert rec["crop"]["mode"] == "markers" and len(rec["crop"]["tags"]) == 16
     code, out = run("capture", SAMPLE, "-o", tmp_path / "o2", "--crop", "markers")
     assert code == 1 and "marker tags" in out and "error:" in out
+
+
+def test_real_raw_files_through_capture(shared_data, tmp_path):
+    """The Bayer DNG becomes a set; the GoPro GPR (VC-5, LibRaw refuses it) is one clean error."""
+    raw = shared_data / "raw"
+    dng = raw / "imageio_test_images" / "Blackmagic_PocketCinema4K_12bit.dng"
+    gpr = raw / "gopro_gpr" / "GOPR0024_HERO6.GPR"
+    code, out = run("capture", dng, gpr, "-o", tmp_path / "o", "--size", 256, "--no-preview")
+    assert code == 1
+    rec = json.loads((tmp_path / "o" / dng.stem / "material.json").read_text())
+    assert rec["input"]["kind"] == "raw" and rec["input"]["bits"] == 16 and rec["exposure"]["mode"] == "auto"
+    errors = [line for line in out.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and "GOPR0024_HERO6.GPR" in errors[0] and "DNG" in errors[0]
+    assert not (tmp_path / "o" / gpr.stem).exists()
