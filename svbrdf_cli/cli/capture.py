@@ -131,28 +131,28 @@ def _clean_partials(out):
             shutil.rmtree(os.path.join(out, name), ignore_errors=True)
 
 
-def run_inputs(files, output, opts, model, threads, skip_done, quiet):
-    """The shared loop; returns (done, skipped, failed) counts."""
-    from tqdm import tqdm
+def plan_inputs(files, output, opts, skip_done, err, store=None):
+    """Which inputs to run: (todo, skipped count, failed count), errors reported through ``err``.
 
+    Two inputs with the same stem (photo.jpg, photo.dng) would write the same
+    folder: the second fails. An existing set is skipped when complete and
+    ``skip_done`` (batch), else it fails unless ``opts.force``. ``store``
+    answers ``exists(stem)`` and ``complete(stem)`` (default: local folders).
+    """
     from svbrdf_cli import capture as C
-    from svbrdf_cli.errors import SvbrdfError
-    from svbrdf_cli.inference import Chain, model_folder
 
-    def err(msg):
-        tqdm.write(f"error: {msg}", file=sys.stderr)  # above the progress bar, never inside it
-
-    # Same output folder for two inputs (photo.jpg, photo.dng): the second would clobber the first.
     seen, todo, failed, skipped = {}, [], 0, 0
     for f in files:
         folder = C.output_folder(output, f)
+        stem = os.path.basename(folder)
         if folder in seen:
             err(f"'{f}' would write to '{folder}' like '{seen[folder]}'; rename one of them.")
             failed += 1
             continue
         seen[folder] = f
-        if os.path.exists(folder) and not opts.force:
-            if skip_done and C.is_complete(folder):
+        exists = store.exists(stem) if store else os.path.exists(folder)
+        if exists and not opts.force:
+            if skip_done and (store.complete(stem) if store else C.is_complete(folder)):
                 log.info("skip %s: %s is complete", f, folder)
                 skipped += 1
                 continue
@@ -160,6 +160,32 @@ def run_inputs(files, output, opts, model, threads, skip_done, quiet):
             failed += 1
             continue
         todo.append(f)
+    return todo, skipped, failed
+
+
+def describe_failure(f, e):
+    """One line for an exception raised while converting ``f``."""
+    from svbrdf_cli.errors import SvbrdfError
+
+    if isinstance(e, SvbrdfError):
+        return str(e)
+    if isinstance(e, MemoryError):
+        return f"'{f}': out of memory; use a smaller --size or downscale the photo."
+    first = (str(e).strip().splitlines() or [""])[0]
+    return f"'{f}': unexpected {type(e).__name__}: {first} (rerun with -vv for details; please report it)."
+
+
+def run_inputs(files, output, opts, model, threads, skip_done, quiet):
+    """The shared local loop; returns (done, skipped, failed) counts."""
+    from tqdm import tqdm
+
+    from svbrdf_cli import capture as C
+    from svbrdf_cli.inference import Chain, model_folder
+
+    def err(msg):
+        tqdm.write(f"error: {msg}", file=sys.stderr)  # above the progress bar, never inside it
+
+    todo, skipped, failed = plan_inputs(files, output, opts, skip_done, err)
     if not todo:
         return 0, skipped, failed
 
@@ -169,14 +195,8 @@ def run_inputs(files, output, opts, model, threads, skip_done, quiet):
     bar = tqdm(total=len(todo), unit="photo", disable=quiet or len(todo) < 2, file=sys.stderr, dynamic_ncols=True)
 
     def report_failure(f, e):
-        if isinstance(e, SvbrdfError):
-            err(str(e))
-        elif isinstance(e, MemoryError):
-            err(f"'{f}': out of memory; use a smaller --size or downscale the photo.")
-        else:
-            log.debug("details", exc_info=e)
-            first = (str(e).strip().splitlines() or [""])[0]
-            err(f"'{f}': unexpected {type(e).__name__}: {first} (rerun with -vv for details; please report it).")
+        log.debug("details", exc_info=e)
+        err(describe_failure(f, e))
 
     # Read and crop the next photo while the current one is in the networks.
     with concurrent.futures.ThreadPoolExecutor(max_workers=1) as pool:
@@ -267,9 +287,14 @@ def capture_cmd(ctx, inputs, output, model, preset, crop, corners, size, exposur
 @click.command("batch")
 @click.argument("folder", type=click.Path(exists=True, file_okay=False))
 @capture_options
+@click.option("--engine", type=click.Choice(["local", "ray"]), default="local", show_default=True,
+              help="local: this process; ray: a Ray cluster (pip install 'svbrdf[scale]'; see docs/scale.md).")
+@click.option("--address", default=None, help="Ray cluster address (default: $RAY_ADDRESS, else a local Ray).")
+@click.option("--workers", type=click.IntRange(1, 100000), default=None,
+              help="Ray workers, each with its own model (default: one per --threads CPUs of the cluster).")
 @click.pass_context
 def batch_cmd(ctx, folder, output, model, preset, crop, corners, size, exposure, white_balance, upsample,
-              bits, fmt, debug, no_preview, threads, force, quiet, verbose):
+              bits, fmt, debug, no_preview, threads, force, quiet, verbose, engine, address, workers):
     """Convert every photo in FOLDER; rerun to resume.
 
     Photos whose texture set is already complete in OUTPUT are skipped (so an
@@ -281,12 +306,24 @@ def batch_cmd(ctx, folder, output, model, preset, crop, corners, size, exposure,
     Examples:
       svbrdf batch shoot_2026-11-20/ -o textures
       svbrdf batch shoot/ -o textures_ue --preset unreal --size 2048 -q
+      svbrdf batch /mnt/shoot -o s3://studio/textures --engine ray --address ray://head:10001
     """
     opts = _options(preset, crop, corners, size, exposure, white_balance, upsample, bits, fmt, debug, no_preview, force)
     files, ignored = collect_inputs([folder])
     quiet = _quiet(ctx, quiet, verbose)
     if not files:
         raise click.UsageError(f"no photos in '{folder}' (looked for {', '.join(sorted(PHOTO_EXTENSIONS))} and RAW files).")
+    if engine == "ray":
+        from tqdm import tqdm
+
+        from svbrdf_cli.scale import run_ray
+
+        counts = run_ray(files, output, opts, model, address=address, workers=workers,
+                         threads_per_worker=threads or 1, quiet=quiet,
+                         err=lambda m: tqdm.write(f"error: {m}", file=sys.stderr))
+        _finish(*counts, ignored, quiet)
+    if "://" in output:
+        raise click.UsageError(f"'{output}' is a URI: use --engine ray, or a local folder.")
     _finish(*run_inputs(files, output, opts, model, threads, skip_done=True, quiet=quiet), ignored, quiet)
 
 

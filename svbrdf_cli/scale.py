@@ -1,0 +1,220 @@
+"""``svbrdf batch --engine ray``: the same batch on a Ray cluster (``pip install svbrdf[scale]``).
+
+The input files become a ``ray.data`` dataset of paths; an actor pool of
+:class:`CaptureWorker` (one model chain per worker, loaded once) reads, crops,
+infers and writes each photo where it is, so pixels never travel through
+Ray's object store: only paths go in and one small result row per photo comes
+out. The driver plans the work exactly as the local engine does (same
+naming, skipping of complete sets, ``--force``, duplicate stems) and prints
+the same summary; a bad photo is a failed row, never a failed job.
+
+Outputs go to a local folder (which every worker must see: on a cluster, a
+shared mount) or to any URI ``pyarrow.fs`` opens (``s3://``, ``gs://``,
+``abfs://``, ``hdfs://``, ``file://``), or else ``fsspec`` (any installed
+implementation, wrapped for pyarrow). Remote sets are written locally on the
+worker first (atomically) and uploaded file by file with ``material.json``
+last: a set whose ``material.json`` exists is complete, which is what resuming
+checks.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import shutil
+import sys
+import tempfile
+
+from svbrdf_cli import capture as C
+from svbrdf_cli.errors import SvbrdfError
+
+log = logging.getLogger("svbrdf")
+
+
+class ScaleError(SvbrdfError):
+    """Ray or the output store is missing or unreachable."""
+
+
+def is_uri(output):
+    return "://" in os.fspath(output)
+
+
+def open_store(output):
+    """(pyarrow FileSystem, root path inside it) for a URI."""
+    try:
+        import pyarrow.fs as pafs
+    except ImportError:
+        raise ScaleError("Writing to a URI needs pyarrow: pip install 'svbrdf[scale]'.") from None
+    try:
+        return pafs.FileSystem.from_uri(output)
+    except (ValueError, NotImplementedError, OSError):  # ArrowInvalid / ArrowNotImplementedError: not pyarrow's
+        pass
+    try:
+        import fsspec
+        from pyarrow.fs import FSSpecHandler, PyFileSystem
+    except ImportError:
+        raise ScaleError(f"No filesystem for '{output}': pyarrow does not know the scheme and fsspec is not installed.") from None
+    try:
+        fs, path = fsspec.core.url_to_fs(output)
+    except (ImportError, ValueError) as e:
+        raise ScaleError(f"No filesystem for '{output}': {e}. Install the fsspec implementation for it.") from None
+    return PyFileSystem(FSSpecHandler(fs)), path
+
+
+class Store:
+    """Where sets go: a local folder or a URI (see the module docstring)."""
+
+    def __init__(self, output):
+        self.output = os.fspath(output)
+        self.remote = is_uri(self.output)
+        if self.remote:
+            self.fs, self.root = open_store(self.output)
+            self.root = self.root.rstrip("/")
+
+    def _info(self, rel):
+        import pyarrow.fs as pafs
+
+        return self.fs.get_file_info(f"{self.root}/{rel}").type != pafs.FileType.NotFound
+
+    def exists(self, stem):
+        return self._info(stem) if self.remote else os.path.exists(os.path.join(self.output, stem))
+
+    def complete(self, stem):
+        return self._info(f"{stem}/{C.RECORD}") if self.remote else C.is_complete(os.path.join(self.output, stem))
+
+    def upload(self, local_folder, stem, force):
+        """Copy a finished local set to ``<root>/<stem>/``, ``material.json`` last."""
+        import pyarrow.fs as pafs
+
+        dest = f"{self.root}/{stem}"
+        if force and self._info(stem):
+            self.fs.delete_dir(dest)
+        self.fs.create_dir(dest, recursive=True)
+        files = sorted(os.path.relpath(os.path.join(d, n), local_folder)
+                       for d, _, names in os.walk(local_folder) for n in names)
+        files.sort(key=lambda rel: rel == C.RECORD)  # the completion marker goes last
+        local = pafs.LocalFileSystem()
+        for rel in files:
+            target = f"{dest}/{rel.replace(os.sep, '/')}"
+            if os.sep in rel:
+                self.fs.create_dir(target.rsplit("/", 1)[0], recursive=True)
+            pafs.copy_files(os.path.join(local_folder, rel), target, source_filesystem=local,
+                            destination_filesystem=self.fs)
+        return f"{self.output.rstrip('/')}/{stem}"
+
+
+class CaptureWorker:
+    """One Ray actor: a model chain loaded once, then photos one by one (``map_batches``)."""
+
+    def __init__(self, model, opts, output, threads=1):
+        from svbrdf_cli.inference import Chain, model_folder
+
+        self.chain = Chain(model_folder(model), threads=threads)
+        self.model, self.opts, self.store = model, opts, Store(output)
+
+    def _one(self, path):
+        from svbrdf_cli.cli.capture import describe_failure
+
+        try:
+            prepared = C.prepare(path, self.opts)
+            if not self.store.remote:
+                folder, rec = C.capture(prepared, self.chain, self.store.output, self.opts, model_name=self.model)
+                return {"path": path, "folder": folder, "error": "", "seconds": sum(rec["timings_s"].values())}
+            tmp = tempfile.mkdtemp(prefix="svbrdf-ray-")
+            try:
+                local, rec = C.capture(prepared, self.chain, tmp, self.opts, model_name=self.model)
+                folder = self.store.upload(local, os.path.basename(local), self.opts.force)
+            finally:
+                shutil.rmtree(tmp, ignore_errors=True)
+            return {"path": path, "folder": folder, "error": "", "seconds": sum(rec["timings_s"].values())}
+        except Exception as e:  # noqa: BLE001 - a bad photo is a failed row, never a failed job
+            return {"path": path, "folder": "", "error": describe_failure(path, e), "seconds": 0.0}
+
+    def __call__(self, batch):
+        rows = [self._one(str(p)) for p in batch["path"]]
+        return {k: [r[k] for r in rows] for k in ("path", "folder", "error", "seconds")}
+
+
+@contextlib.contextmanager
+def _silenced_fd2(active):
+    if not active:
+        yield
+        return
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 2)
+            yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
+def run_ray(files, output, opts, model, address=None, workers=None, threads_per_worker=1, skip_done=True,
+            quiet=False, err=print):
+    """Run the batch on Ray; returns (done, skipped, failed) like the local engine."""
+    quiet_ray = log.getEffectiveLevel() > logging.DEBUG  # Ray's own INFO lines would bury the summary
+    if quiet_ray:
+        # The driver's core worker logs an "E" line for every actor pool (ray-project/ray#53727) that is
+        # no error of ours; real failures still reach the user as failed rows or exceptions.
+        os.environ.setdefault("RAY_BACKEND_LOG_LEVEL", "fatal")
+    try:
+        import ray
+        import ray.data
+    except ImportError:
+        raise ScaleError("--engine ray needs Ray: pip install 'svbrdf[scale]'.") from None
+    if quiet_ray:
+        for name in ("ray", "ray.data"):
+            logging.getLogger(name).setLevel(logging.ERROR if quiet else logging.WARNING)
+    from svbrdf_cli.cli.capture import _clean_partials, plan_inputs
+    from svbrdf_cli.inference import model_folder
+
+    store = Store(output)
+    model_folder(model)  # fail early, on the driver, for a model that is not installed
+    todo, skipped, failed = plan_inputs(files, output, opts, skip_done, err, store=store)
+    if not todo:
+        return 0, skipped, failed
+    if not store.remote:
+        os.makedirs(output, exist_ok=True)
+        _clean_partials(output)
+    started_here = not ray.is_initialized()
+    if started_here:
+        try:
+            with _silenced_fd2(quiet_ray):  # the core worker announces its log level on fd 2
+                ray.init(address=address, logging_level=logging.ERROR, log_to_driver=False,
+                         include_dashboard=False, ignore_reinit_error=True)
+        except (ConnectionError, RuntimeError, ValueError) as e:
+            raise ScaleError(f"Could not reach the Ray cluster at '{address}': {e}. "
+                             "Check --address (ray://HOST:10001 or HOST:6379) or start one with 'ray start --head'.") from None
+    try:
+        ctx = ray.data.DataContext.get_current()
+        ctx.enable_progress_bars = not quiet
+        if workers is None:
+            workers = max(1, int(ray.cluster_resources().get("CPU", 1) // max(1, threads_per_worker)))
+        # Absolute paths: workers may start in another directory.
+        paths = [os.path.abspath(p) for p in todo]
+        ds = ray.data.from_items([{"path": p} for p in paths], override_num_blocks=min(len(paths), 200))
+        pool = ray.data.ActorPoolStrategy(min_size=1, max_size=workers, initial_size=min(workers, len(paths)))
+        ds = ds.map_batches(CaptureWorker, fn_constructor_args=(model, opts, output, threads_per_worker),
+                            batch_size=1, compute=pool, num_cpus=threads_per_worker)
+        rows = ds.take_all()
+    finally:
+        if started_here:
+            ray.shutdown()
+    done = 0
+    by_path = {r["path"]: r for r in rows}
+    for p, original in zip(paths, todo):
+        r = by_path.get(p)
+        if r is None:
+            err(f"'{original}': no result came back from the cluster; rerun the batch to retry it.")
+            failed += 1
+        elif r["error"]:
+            err(r["error"])
+            failed += 1
+        else:
+            done += 1
+            if not quiet:
+                log.info("%s -> %s (%.1f s)", original, r["folder"], r["seconds"])
+    return done, skipped, failed
