@@ -2,6 +2,7 @@
 
     python -m svbrdf_cli.bench                       # 256, 1024, 2048 from a 12 MP JPEG
     python -m svbrdf_cli.bench --sizes 256,4096 --repeat 5 --photo my.dng
+    python -m svbrdf_cli.bench --throughput 24      # svbrdf batch: local engine vs Ray, photos/s
 
 Each configuration runs in its own process (so peak memory is its own):
 the photo is read, cropped, exposed, run through the model chain,
@@ -87,6 +88,35 @@ def _spawn(args):
     return json.loads(r.stdout.strip().splitlines()[-1])
 
 
+def _throughput(count, model):
+    """Wall-clock photos/s of ``svbrdf batch`` (a fresh process each), local engine then Ray."""
+    import shutil
+
+    with tempfile.TemporaryDirectory() as tmp:
+        src = os.path.join(tmp, "in")
+        os.makedirs(src)
+        _synthetic_photo(os.path.join(src, "p000.jpg"), 1600, 1200)
+        for i in range(1, count):
+            shutil.copy(os.path.join(src, "p000.jpg"), os.path.join(src, f"p{i:03d}.jpg"))
+        click.echo(f"{count} photos 1600x1200 JPEG -> 1024 px native sets with previews; model {model}; "
+                   f"{os.cpu_count()} cores; wall clock of the whole command (start-up included)")
+        rows = []
+        for engine in ("local", "ray"):
+            out = os.path.join(tmp, f"out_{engine}")
+            cmd = [sys.executable, "-m", "svbrdf_cli.cli.main", "batch", src, "-o", out, "--model", model, "-q",
+                   "--engine", engine]
+            t0 = time.perf_counter()
+            r = subprocess.run(cmd, capture_output=True, text=True)
+            dt = time.perf_counter() - t0
+            if r.returncode:
+                raise click.ClickException(f"{engine} engine failed: {r.stderr.strip()[-300:]}")
+            rows.append((engine, dt))
+    click.echo("| engine | seconds | photos/s | vs local |")
+    click.echo("|---|---|---|---|")
+    for engine, dt in rows:
+        click.echo(f"| {engine} | {dt:.1f} | {count / dt:.2f} | {rows[0][1] / dt:.2f} |")
+
+
 @click.command()
 @click.option("--photo", type=click.Path(exists=True, dir_okay=False), default=None,
               help="Photo to run on (default: a synthetic 4000x3000 JPEG).")
@@ -95,9 +125,13 @@ def _spawn(args):
 @click.option("--model", default="fast", show_default=True)
 @click.option("--threads", default=0, help="onnxruntime threads (0: one per core).")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None, help="Also write the figures here.")
+@click.option("--throughput", type=int, default=0,
+              help="Instead: time 'svbrdf batch' on this many 1600x1200 JPEGs, local engine vs Ray.")
 @click.option("--child", default=None, hidden=True)
-def cli(photo, sizes, repeat, model, threads, json_out, child):
+def cli(photo, sizes, repeat, model, threads, json_out, child, throughput):
     """Time the capture job by stage at several output sizes, with peak memory."""
+    if throughput:
+        return _throughput(throughput, model)
     if child:
         a = json.loads(child)
         res = _networks_only(a["model"], a["threads"], a["repeat"]) if a["photo"] is None else \
