@@ -152,13 +152,20 @@ def evaluate(run=None, des19=None, out=None, modes=MODES, log=print, onnx=None):
 @click.option("--out", type=click.Path(file_okay=False), default=None, help="Where predicted maps go.")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None, help="Write the numbers here too.")
 @click.option("--threads", default=0)
-def cli(run, onnx, des19, out, json_out, threads):
+@click.option("--modes", default=",".join(MODES), show_default=True,
+              help="Which Table IV rows (comma-separated); ablation runs (--variant nomask/e2e) use 'full'.")
+def cli(run, onnx, des19, out, json_out, threads, modes):
     """Score a trained run (or its ONNX export) on Des19 with the paper's metric."""
     if not (run or onnx):
         raise click.UsageError("give --run or --onnx")
     if threads:
         torch.set_num_threads(threads)
-    results = evaluate(run, des19, out, log=click.echo, onnx=onnx)
+    modes = tuple(m for m in modes.split(",") if m)
+    unknown = set(modes) - set(MODES)
+    if unknown:
+        raise click.BadParameter(f"unknown mode(s) {', '.join(sorted(unknown))}; choose from {', '.join(MODES)}",
+                                 param_hint="--modes")
+    results = evaluate(run, des19, out, modes=modes, log=click.echo, onnx=onnx)
     if json_out:
         with open(json_out, "w") as f:
             json.dump(results, f, indent=1)

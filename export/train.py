@@ -33,7 +33,7 @@ import torch
 from export import losses as L
 from export.data import dataset as D
 from export.files import atomic_torch_save, read_json, write_json
-from export.nets.chain import STAGES, TIERS, SVBRDFNet
+from export.nets.chain import STAGES, TIERS, VARIANTS, build
 from svbrdf_cli import conventions as cv
 
 #: Ground truth each stage needs from the data engine.
@@ -57,6 +57,7 @@ class RunConfig:
     adversarial: bool = True
     perceptual: bool = True
     val_samples: int = 16
+    variant: str = "chain"   # or a Table IV ablation: "nomask", "e2e" (export.nets.chain.VARIANTS)
 
 
 def _stored_targets(batch):
@@ -69,7 +70,10 @@ class StageTrainer:
     def __init__(self, stage, out, config: RunConfig, net=None, bank=None):
         self.stage, self.out, self.cfg = stage, out, config
         self.device = torch.device(config.device)
-        self.net = net if net is not None else SVBRDFNet(config.tier).to(self.device)
+        if stage not in VARIANTS[config.variant]:
+            raise click.ClickException(f"the {config.variant} variant has no '{stage}' stage "
+                                       f"(it trains {', '.join(VARIANTS[config.variant])})")
+        self.net = net if net is not None else build(config.tier, variant=config.variant).to(self.device)
         self.bank = bank
         self.data_cfg = D.DataConfig(size=config.size, targets=STAGE_TARGETS[stage])
         self.gen = D.worker_generator(config.seed, STAGES.index(stage) + 1, "cpu")
@@ -105,6 +109,8 @@ class StageTrainer:
     # -- frozen earlier stages and checkpoints ---------------------------------
     def _load_frozen(self):
         for s in STAGES[:STAGES.index(self.stage)]:
+            if s not in VARIANTS[self.cfg.variant]:
+                continue
             p = os.path.join(self.out, f"{s}.pt")
             if not os.path.exists(p):
                 raise click.ClickException(f"{p}: stage '{s}' must be trained before '{self.stage}'")
@@ -129,6 +135,9 @@ class StageTrainer:
         ck = torch.load(self.path, map_location=self.device, weights_only=False)
         if ck["config"]["tier"] != self.cfg.tier:
             raise click.ClickException(f"{self.path}: was trained as tier {ck['config']['tier']!r}, not {self.cfg.tier!r}")
+        if ck["config"].get("variant", "chain") != self.cfg.variant:
+            raise click.ClickException(f"{self.path}: was trained as variant {ck['config'].get('variant', 'chain')!r}, "
+                                       f"not {self.cfg.variant!r}")
         self.net.stage(self.stage).load_state_dict(ck["weights"])
         self.opt.load_state_dict(ck["optimizer"])
         self.step, self.total, self.elapsed = ck["step"], ck["total"], ck["elapsed"]
@@ -277,7 +286,7 @@ def record_provenance(out, trainer, val):
     prov = read_json(path)
     cfg = trainer.cfg
     prov.setdefault("stages", {})[trainer.stage] = {
-        "tier": cfg.tier, "steps": trainer.step, "batch": cfg.batch, "size": cfg.size, "seed": cfg.seed,
+        "tier": cfg.tier, "variant": cfg.variant, "steps": trainer.step, "batch": cfg.batch, "size": cfg.size, "seed": cfg.seed,
         "device": str(trainer.device) + ("" if trainer.device.type != "cpu" else f" ({platform.processor() or platform.machine()}, {torch.get_num_threads()} threads)"),
         "seconds": round(trainer.elapsed, 1), "samples_seen": trainer.step * cfg.batch,
         "losses": {"adversarial": cfg.adversarial, "perceptual": cfg.perceptual} if trainer.stage == "aux" else None,
@@ -292,10 +301,14 @@ def record_provenance(out, trainer, val):
 
 
 def load_trained(out, tier=None, device="cpu", stages=STAGES):
-    """An :class:`SVBRDFNet` with the stage weights found in ``out`` (eval mode)."""
-    tier = tier or read_json(os.path.join(out, "provenance.json")).get("stages", {}).get("masks", {}).get("tier", "fast")
-    net = SVBRDFNet(tier, pretrained=False).to(device)
+    """The network (of the run's tier and variant) with the stage weights found in ``out`` (eval mode)."""
+    recorded = list(read_json(os.path.join(out, "provenance.json")).get("stages", {}).values())
+    tier = tier or (recorded[0].get("tier") if recorded else "fast")
+    variant = recorded[0].get("variant", "chain") if recorded else "chain"
+    net = build(tier, pretrained=False, variant=variant).to(device)
     for s in stages:
+        if s not in VARIANTS[variant]:
+            continue
         p = os.path.join(out, f"{s}.pt")
         if os.path.exists(p):
             net.stage(s).load_state_dict(torch.load(p, map_location=device, weights_only=False)["weights"])
@@ -319,19 +332,23 @@ def load_trained(out, tier=None, device="cpu", stages=STAGES):
 @click.option("--val-every", default=100, show_default=True)
 @click.option("--shared", type=click.Path(file_okay=False), default=None,
               help="Shared data folder with materials/ (CC0 seeds); default ../shared/data.")
+@click.option("--variant", type=click.Choice(tuple(VARIANTS)), default="chain", show_default=True,
+              help="chain: the paper's model; nomask / e2e: Table IV ablations (aux without masks; "
+                   "one UNet from photo to maps with the chain's parameter count).")
 def cli(stage, tier, out, steps, minutes, batch, size, device, seed, threads, fresh, no_adversarial,
-        checkpoint_every, val_every, shared):
+        checkpoint_every, val_every, shared, variant):
     """Train the model stage by stage."""
     if threads:
         torch.set_num_threads(threads)
     if size % 32:
         raise click.BadParameter("must be a multiple of 32", param_hint="--size")
-    out = out or os.path.join("runs", tier)
+    out = out or os.path.join("runs", tier if variant == "chain" else f"{tier}-{variant}")
     bank = D.SeedBank.find(shared)
-    cfg = RunConfig(tier=tier, size=size, batch=batch, seed=seed, device=device, adversarial=not no_adversarial)
-    stages = STAGES if stage == "all" else (stage,)
+    cfg = RunConfig(tier=tier, size=size, batch=batch, seed=seed, device=device, adversarial=not no_adversarial,
+                    variant=variant)
+    stages = VARIANTS[variant] if stage == "all" else (stage,)
     for s in stages:
-        share = ALL_SPLIT[s] if stage == "all" else 1.0
+        share = ALL_SPLIT[s] / sum(ALL_SPLIT[x] for x in stages) if stage == "all" else 1.0
         train_stage(s, out, cfg, steps=math.ceil(steps * share) if steps else None,
                     minutes=minutes * share if minutes else None, resume=not fresh,
                     checkpoint_every=checkpoint_every, val_every=val_every, bank=bank,

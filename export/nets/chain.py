@@ -14,6 +14,15 @@ encoding (:func:`svbrdf_cli.conventions.encode_maps`): normals xyz*0.5+0.5
 input is centred to [-1, 1] for the UNets; the backbone normalises its own.
 
 Tiers scale every network's width; :func:`build` makes one.
+
+Two ablations of the paper's Table IV are variants of the same interface
+(``run_masks``, ``run_aux``, ``run_maps``, ``stage``), so training,
+evaluation and export treat them alike (:data:`VARIANTS`):
+
+* ``nomask``: :class:`SVBRDFNet` with ``use_masks=False``: the aux networks
+  get zero masks (input -> aux -> maps without the mask stage);
+* ``e2e``: :class:`EndToEndNet`, one UNet from the photo straight to the
+  maps, as wide as makes its parameter count that of the whole chain.
 """
 
 from __future__ import annotations
@@ -29,6 +38,8 @@ from export.nets.unet import UNet
 from svbrdf_cli import conventions as cv
 
 STAGES = ("masks", "aux", "maps")
+#: Variant -> the stages it trains (see the module docstring).
+VARIANTS = {"chain": STAGES, "nomask": ("aux", "maps"), "e2e": ("maps",)}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -55,10 +66,12 @@ def _centre(x):
 class SVBRDFNet(nn.Module):
     """All stages; ``forward(photo)`` runs the whole chain."""
 
-    def __init__(self, tier="fast", pretrained=True):
+    def __init__(self, tier="fast", pretrained=True, use_masks=True):
         super().__init__()
         t = TIERS[tier] if isinstance(tier, str) else tier
         self.tier = tier if isinstance(tier, str) else "custom"
+        self.use_masks = use_masks
+        self.variant = "chain" if use_masks else "nomask"
         self.masks = nn.ModuleDict({
             "M_b": BackboneUNet(3, width=t.mask_width, pretrained=pretrained),
             "M_h": BackboneUNet(3, width=t.mask_width, pretrained=pretrained),
@@ -79,6 +92,9 @@ class SVBRDFNet(nn.Module):
         return getattr(self, name)
 
     def run_masks(self, photo):
+        if not self.use_masks:
+            zero = photo * 0.0  # masks have the photo's three channels
+            return {"M_b": zero, "M_h": zero}
         return {k: net(photo) for k, net in self.masks.items()}
 
     def run_aux(self, photo, masks):
@@ -105,8 +121,59 @@ class SVBRDFNet(nn.Module):
         return {**masks, **aux, **self.run_maps(photo, aux)}
 
 
-def build(tier="fast", pretrained=True):
-    return SVBRDFNet(tier, pretrained=pretrained)
+def _encode_maps_head(out, photo):
+    """A 10-channel head (normal offset, diffuse, roughness, specular) -> stored-encoding maps."""
+    n = cv.normalize(_centre(out[:, :3]) + photo.new_tensor(cv.FLAT_NORMAL).reshape(1, 3, 1, 1), axis=1)
+    return {"normal": cv.encode_normals(n), "diffuse": out[:, 3:6], "roughness": out[:, 6:7], "specular": out[:, 7:10]}
+
+
+class EndToEndNet(nn.Module):
+    """Table IV's baseline: input -> maps by one UNet, no intermediate targets.
+
+    ``base`` defaults to the width whose parameter count is closest to the
+    whole chain of ``tier`` (:func:`e2e_base`).
+    """
+
+    def __init__(self, tier="fast", base=None, depth=5):
+        super().__init__()
+        self.tier = tier if isinstance(tier, str) else "custom"
+        self.variant = "e2e"
+        self.base = base or e2e_base(tier)
+        self.maps = nn.ModuleDict({"all": UNet(3, 10, base=self.base, depth=depth)})
+
+    def stage(self, name):
+        if name != "maps":
+            raise KeyError(f"the end-to-end baseline has only the maps stage, not {name!r}")
+        return self.maps
+
+    def run_masks(self, photo):
+        return {}
+
+    def run_aux(self, photo, masks):
+        return {}
+
+    def run_maps(self, photo, aux=None):
+        return _encode_maps_head(self.maps["all"](_centre(photo)), photo)
+
+    def forward(self, photo):
+        return self.run_maps(photo)
+
+
+def e2e_base(tier="fast"):
+    """UNet width giving the end-to-end baseline the chain's parameter count."""
+    from export.nets.cost import count_parameters
+
+    target = count_parameters(SVBRDFNet(tier, pretrained=False))
+    return min(range(8, 129, 4), key=lambda b: abs(count_parameters(UNet(3, 10, base=b)) - target))
+
+
+def build(tier="fast", pretrained=True, variant="chain"):
+    """A network of ``variant`` (a key of :data:`VARIANTS`)."""
+    if variant == "e2e":
+        return EndToEndNet(tier)
+    if variant not in VARIANTS:
+        raise ValueError(f"unknown variant {variant!r}; choose one of {', '.join(VARIANTS)}")
+    return SVBRDFNet(tier, pretrained=pretrained, use_masks=variant == "chain")
 
 
 def tier_costs(size=256):

@@ -68,3 +68,31 @@ def test_untrained_normal_network_starts_flat():
     n = out["normal"] * 2 - 1
     assert (n[:, 2] > 0).all()
     assert float(n[:, 2].mean()) > 0.9
+
+
+def test_ablation_variants_train_and_reload(tmp_path):
+    """Table IV's ablations: aux -> maps with zero masks, and one end-to-end UNet."""
+    import dataclasses
+
+    nomask = dataclasses.replace(CFG, variant="nomask")
+    TR.train_stage("aux", str(tmp_path / "nm"), nomask, steps=1, progress=False, log=_quiet)  # no masks stage needed
+    TR.train_stage("maps", str(tmp_path / "nm"), nomask, steps=1, progress=False, log=_quiet)
+    net = TR.load_trained(str(tmp_path / "nm"))
+    x = torch.rand(1, 3, 32, 32)
+    with torch.no_grad():
+        masks = net.run_masks(x)
+        assert all(float(m.abs().max()) == 0 for m in masks.values())
+        assert net(x)["normal"].shape == (1, 3, 32, 32)
+
+    e2e = dataclasses.replace(CFG, variant="e2e")
+    t = TR.train_stage("maps", str(tmp_path / "e2e"), e2e, steps=2, progress=False, log=_quiet)
+    assert all(torch.isfinite(torch.tensor(h["loss"])) for h in t.history)
+    net = TR.load_trained(str(tmp_path / "e2e"))
+    assert net.variant == "e2e"
+    with torch.no_grad():
+        out = net.run_maps(x, net.run_aux(x, net.run_masks(x)))
+    assert set(out) == {"normal", "diffuse", "roughness", "specular"} and out["roughness"].shape == (1, 1, 32, 32)
+    import click
+
+    with pytest.raises(click.ClickException, match="no 'masks' stage"):
+        TR.StageTrainer("masks", str(tmp_path / "e2e"), e2e)
