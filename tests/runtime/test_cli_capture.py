@@ -231,3 +231,16 @@ def test_real_raw_files_through_capture(shared_data, tmp_path):
     errors = [line for line in out.splitlines() if line.startswith("error:")]
     assert len(errors) == 1 and "GOPR0024_HERO6.GPR" in errors[0] and "DNG" in errors[0]
     assert not (tmp_path / "o" / gpr.stem).exists()
+
+
+def test_manual_corners_exposure_and_white_balance_are_recorded(tmp_path):
+    photo = _photo(tmp_path / "shot.png", 300, 400)
+    code, out = run("capture", photo, "-o", tmp_path / "o", "--corners", "50,40,350,45,340,290,60,280",
+                    "--exposure", "0.5", "--white-balance", "1.2,1,0.8", "--no-preview")
+    assert code == 0, out
+    rec = json.loads((tmp_path / "o" / "shot" / "material.json").read_text())
+    assert rec["crop"]["mode"] == "corners" and rec["crop"]["quad"][0] == [50.0, 40.0]
+    assert rec["exposure"] == {"mode": "manual", "stops": 0.5}
+    assert rec["white_balance"] == [1.2, 1.0, 0.8]
+    code, out = run("capture", photo, "-o", tmp_path / "o2", "--corners", "0,0,900,0,900,900,0,900")
+    assert code == 1 and "outside" in out
