@@ -154,7 +154,8 @@ def evaluate(run=None, des19=None, out=None, modes=MODES, log=print, onnx=None):
 @click.option("--threads", default=0)
 @click.option("--modes", default=",".join(MODES), show_default=True,
               help="Which Table IV rows (comma-separated); ablation runs (--variant nomask/e2e) use 'full'.")
-def cli(run, onnx, des19, out, json_out, threads, modes):
+@click.option("--record", is_flag=True, help="With --onnx: add the scores to the folder's provenance.json.")
+def cli(run, onnx, des19, out, json_out, threads, modes, record):
     """Score a trained run (or its ONNX export) on Des19 with the paper's metric."""
     if not (run or onnx):
         raise click.UsageError("give --run or --onnx")
@@ -169,6 +170,18 @@ def cli(run, onnx, des19, out, json_out, threads, modes):
     if json_out:
         with open(json_out, "w") as f:
             json.dump(results, f, indent=1)
+    if record:
+        if not onnx:
+            raise click.UsageError("--record needs --onnx")
+        from export.files import read_json, write_json
+
+        path = os.path.join(onnx, "provenance.json")
+        prov = read_json(path)
+        prov["des19"] = {"full_chain": results["full"], "paper": results["paper"],
+                         "metric": "../shared/tools/score_maps.py (per-map RMSE; roughness as 0.9 r + 0.1); "
+                                   "relight: mean RMSE of encoded renders under 9 lights",
+                         "command": f"python -m export.evaluate --onnx {onnx} --record"}
+        write_json(path, prov)
 
 
 if __name__ == "__main__":

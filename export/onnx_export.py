@@ -113,14 +113,35 @@ def store_float16(model, min_elements=16):
 
 
 def export_run(run, out, size=256, half=True):
-    """Export every stage of a trained run (see :func:`export.train.load_trained`)."""
-    from export.files import read_json
+    """Export every stage of a trained run (see :func:`export.train.load_trained`).
+
+    Beside the models, ``provenance.json`` holds the run's provenance (data,
+    steps, device, time, validation), the export settings and each file's
+    size and SHA-256; ``python -m export.evaluate --onnx OUT --record`` adds
+    the Des19 scores of the exported chain.
+    """
+    import hashlib
+    import time
+
+    from export.files import read_json, write_json
     from export.train import load_trained
 
     net = load_trained(run)
     prov = read_json(os.path.join(run, "provenance.json"))
     os.makedirs(out, exist_ok=True)
-    return [export_stage(net, s, os.path.join(out, f"{s}.onnx"), size, {"provenance": prov}, half) for s in STAGES]
+    paths = [export_stage(net, s, os.path.join(out, f"{s}.onnx"), size, {"provenance": prov}, half) for s in STAGES]
+    files = {}
+    for p in paths:
+        with open(p, "rb") as f:
+            files[os.path.basename(p)] = {"bytes": os.path.getsize(p), "sha256": hashlib.sha256(f.read()).hexdigest()}
+    write_json(os.path.join(out, "provenance.json"), {
+        "training": prov,
+        "export": {"opset": OPSET, "weights": "float16 storage, float32 compute" if half else "float32",
+                   "trace_size": size, "torch": torch.__version__, "conventions": cv.CONVENTIONS_VERSION,
+                   "exported": time.strftime("%Y-%m-%dT%H:%M:%S"), "files": files,
+                   "command": f"python -m export.onnx_export --run {run} --out {out}" + ("" if half else " --float32")},
+    })
+    return paths
 
 
 @click.command()

@@ -79,6 +79,15 @@ class Chain:
             self.sessions[stage], self.meta[stage] = sess, meta
         self.multiple = max(int(m.get("size_multiple", "32")) for m in self.meta.values())
         self.tier = self.meta["maps"].get("tier", "custom")
+        # Which exported set this is: the SHA-256 of each file, from the export's provenance.json.
+        self.files = {}
+        prov = os.path.join(self.folder, "provenance.json")
+        if os.path.isfile(prov):
+            import json
+
+            with open(prov) as f:
+                files = json.load(f).get("export", {}).get("files", {})
+            self.files = {k: v.get("sha256", "")[:16] for k, v in files.items()}
         self.timings = {}  # seconds of each stage in the last call
 
     def _run(self, stage, feeds):
