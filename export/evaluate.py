@@ -103,9 +103,26 @@ def score(gt_root, pred_root=None, prefix=""):
     return {k: float(v) for k, v in vals.items()}, line
 
 
-def evaluate(run=None, des19=None, out=None, modes=MODES, log=print, onnx=None):
+def oracle_scale(pred_linear, gt_linear):
+    """Pred maps with diffuse and specular times the one scalar that best fits the ground truth.
+
+    A diagnostic, not a method: from one auto-exposed photo the albedo scale
+    is ambiguous (a darker material under a stronger light looks the same),
+    and Des19's ground truth sits ~5x lower in the stored encoding than
+    physically scaled albedo (its dielectric specular is stored as ~0.043,
+    linear F0 ~0.001, against 0.04). Least squares over both maps, in linear
+    space, per sample.
+    """
+    p = torch.cat([pred_linear["diffuse"].flatten(), pred_linear["specular"].flatten()])
+    g = torch.cat([gt_linear["diffuse"].flatten(), gt_linear["specular"].flatten()])
+    k = float((p * g).sum() / (p * p).sum().clamp_min(1e-12))
+    return dict(pred_linear, diffuse=pred_linear["diffuse"] * k, specular=pred_linear["specular"] * k), k
+
+
+def evaluate(run=None, des19=None, out=None, modes=MODES, log=print, onnx=None, oracle=False):
     """Score a torch run, or (``onnx``: a folder of exported stages) the
-    runtime's onnxruntime chain; the latter has only the ``full`` mode."""
+    runtime's onnxruntime chain; the latter has only the ``full`` mode.
+    ``oracle`` adds the ``full`` row with :func:`oracle_scale` applied."""
     des19 = des19 or str(shared_root() / "data" / "validation" / "des19")
     if not os.path.isdir(des19):
         raise click.ClickException(f"{des19}: Des19 validation samples not found (set SVBRDF_SHARED)")
@@ -123,20 +140,25 @@ def evaluate(run=None, des19=None, out=None, modes=MODES, log=print, onnx=None):
         if any(m != "full" for m in modes) else {}
     out = out or tempfile.mkdtemp(prefix="svbrdf-eval-")
     results = {}
-    for mode in modes:
-        rel = []
+    for mode in modes + (("full_oracle_scale",) if oracle and "full" in modes else ()):
+        rel, scales = [], []
         for name, photo, gt in samples:
             if onnx:
                 res = chain(photo.permute(1, 2, 0).numpy())
                 pred = {k: torch.from_numpy(res[k]).permute(2, 0, 1) for k in cv.MAP_NAMES}
             else:
-                pred = predict(net, photo, mode, inter.get(name))
+                pred = predict(net, photo, mode.replace("_oracle_scale", ""), inter.get(name))
             lin = cv.decode_maps({k: pred[k] for k in cv.MAP_NAMES}, axis=0)
+            if mode.endswith("_oracle_scale"):
+                lin, k = oracle_scale(lin, gt)
+                scales.append(k)
             write_map_set(os.path.join(out, mode, name), {k: v.permute(1, 2, 0).numpy() for k, v in lin.items()})
             rel.append(relight_rmse(lin, gt))
         maps, line = score(des19, os.path.join(out, mode))
         results[mode] = {**maps, "relight": float(np.mean(rel)), "samples": len(samples)}
-        log(f"{mode:9s} {line}  relight={np.mean(rel):.4f}")
+        if scales:
+            results[mode]["scale_median"] = float(np.median(scales))
+        log(f"{mode:9s} {line}  relight={np.mean(rel):.4f}" + (f"  median scale={np.median(scales):.3f}" if scales else ""))
     paper, line = score(des19, prefix="paper_")
     results["paper"] = paper
     log(f"{'paper':9s} {line}")
@@ -155,7 +177,10 @@ def evaluate(run=None, des19=None, out=None, modes=MODES, log=print, onnx=None):
 @click.option("--modes", default=",".join(MODES), show_default=True,
               help="Which Table IV rows (comma-separated); ablation runs (--variant nomask/e2e) use 'full'.")
 @click.option("--record", is_flag=True, help="With --onnx: add the scores to the folder's provenance.json.")
-def cli(run, onnx, des19, out, json_out, threads, modes, record):
+@click.option("--oracle-scale", "oracle", is_flag=True,
+              help="Also score 'full' with diffuse and specular rescaled per sample by the best-fitting "
+                   "scalar (a diagnostic of the albedo-scale ambiguity, not a result).")
+def cli(run, onnx, des19, out, json_out, threads, modes, record, oracle):
     """Score a trained run (or its ONNX export) on Des19 with the paper's metric."""
     if not (run or onnx):
         raise click.UsageError("give --run or --onnx")
@@ -166,7 +191,7 @@ def cli(run, onnx, des19, out, json_out, threads, modes, record):
     if unknown:
         raise click.BadParameter(f"unknown mode(s) {', '.join(sorted(unknown))}; choose from {', '.join(MODES)}",
                                  param_hint="--modes")
-    results = evaluate(run, des19, out, modes=modes, log=click.echo, onnx=onnx)
+    results = evaluate(run, des19, out, modes=modes, log=click.echo, onnx=onnx, oracle=oracle)
     if json_out:
         with open(json_out, "w") as f:
             json.dump(results, f, indent=1)
