@@ -119,10 +119,36 @@ def oracle_scale(pred_linear, gt_linear):
     return dict(pred_linear, diffuse=pred_linear["diffuse"] * k, specular=pred_linear["specular"] * k), k
 
 
-def evaluate(run=None, des19=None, out=None, modes=MODES, log=print, onnx=None, oracle=False):
+def known_flash_scale(pred_linear, photo, intensity=cv.LIGHT_INTENSITY):
+    """Pred maps with diffuse and specular rescaled so that, rendered under a
+    flash of the known ``intensity``, they reproduce the photo's brightness.
+
+    Uses the input alone, never the ground truth: the photo's linear values
+    are fitted (least squares over unsaturated pixels) by the predicted maps'
+    flash rendering at unit intensity; the fitted intensity over the known one
+    is the albedo scale. This is what a capture with a calibrated flash and
+    fixed exposure allows; Des19's inputs are such captures (fitting the
+    renderer to its ground truth gives a median intensity of 3.0 against the
+    conventions' 2.91).
+    """
+    img = T.flash_image({k: v[None] for k, v in pred_linear.items()}, intensity=1.0)[0]
+    lin = cv.image_to_linear(photo)
+    ok = (photo < 0.98).all(0, keepdim=True).expand_as(img)
+    k = float((img[ok] * lin[ok]).sum() / (img[ok] ** 2).sum().clamp_min(1e-12)) / intensity
+    return dict(pred_linear, diffuse=(pred_linear["diffuse"] * k).clamp(0, 1),
+                specular=(pred_linear["specular"] * k).clamp(0, 1)), k
+
+
+#: Post-hoc albedo rescalings of the ``full`` row: name -> (row suffix, f(linear maps, photo, gt) -> (maps, scale)).
+RESCALINGS = {"oracle": ("_oracle_scale", lambda lin, photo, gt: oracle_scale(lin, gt)),
+              "known_flash": ("_known_flash", lambda lin, photo, gt: known_flash_scale(lin, photo))}
+
+
+def evaluate(run=None, des19=None, out=None, modes=MODES, log=print, onnx=None, oracle=False, known_flash=False):
     """Score a torch run, or (``onnx``: a folder of exported stages) the
     runtime's onnxruntime chain; the latter has only the ``full`` mode.
-    ``oracle`` adds the ``full`` row with :func:`oracle_scale` applied."""
+    ``oracle`` adds the ``full`` row with :func:`oracle_scale` applied,
+    ``known_flash`` the one with :func:`known_flash_scale`."""
     des19 = des19 or str(shared_root() / "data" / "validation" / "des19")
     if not os.path.isdir(des19):
         raise click.ClickException(f"{des19}: Des19 validation samples not found (set SVBRDF_SHARED)")
@@ -140,17 +166,18 @@ def evaluate(run=None, des19=None, out=None, modes=MODES, log=print, onnx=None, 
         if any(m != "full" for m in modes) else {}
     out = out or tempfile.mkdtemp(prefix="svbrdf-eval-")
     results = {}
-    for mode in modes + (("full_oracle_scale",) if oracle and "full" in modes else ()):
+    extra = [RESCALINGS[r] for r, on in (("oracle", oracle), ("known_flash", known_flash)) if on and "full" in modes]
+    for mode, rescale in [(m, None) for m in modes] + [("full" + suffix, f) for suffix, f in extra]:
         rel, scales = [], []
         for name, photo, gt in samples:
             if onnx:
                 res = chain(photo.permute(1, 2, 0).numpy())
                 pred = {k: torch.from_numpy(res[k]).permute(2, 0, 1) for k in cv.MAP_NAMES}
             else:
-                pred = predict(net, photo, mode.replace("_oracle_scale", ""), inter.get(name))
+                pred = predict(net, photo, "full" if rescale else mode, inter.get(name))
             lin = cv.decode_maps({k: pred[k] for k in cv.MAP_NAMES}, axis=0)
-            if mode.endswith("_oracle_scale"):
-                lin, k = oracle_scale(lin, gt)
+            if rescale:
+                lin, k = rescale(lin, photo, gt)
                 scales.append(k)
             write_map_set(os.path.join(out, mode, name), {k: v.permute(1, 2, 0).numpy() for k, v in lin.items()})
             rel.append(relight_rmse(lin, gt))
@@ -180,7 +207,10 @@ def evaluate(run=None, des19=None, out=None, modes=MODES, log=print, onnx=None, 
 @click.option("--oracle-scale", "oracle", is_flag=True,
               help="Also score 'full' with diffuse and specular rescaled per sample by the best-fitting "
                    "scalar (a diagnostic of the albedo-scale ambiguity, not a result).")
-def cli(run, onnx, des19, out, json_out, threads, modes, record, oracle):
+@click.option("--known-flash", "known_flash", is_flag=True,
+              help="Also score 'full' with diffuse and specular rescaled so that the maps reproduce the input "
+                   "under the conventions' flash intensity (a calibrated capture; uses the input only).")
+def cli(run, onnx, des19, out, json_out, threads, modes, record, oracle, known_flash):
     """Score a trained run (or its ONNX export) on Des19 with the paper's metric."""
     if not (run or onnx):
         raise click.UsageError("give --run or --onnx")
@@ -191,7 +221,8 @@ def cli(run, onnx, des19, out, json_out, threads, modes, record, oracle):
     if unknown:
         raise click.BadParameter(f"unknown mode(s) {', '.join(sorted(unknown))}; choose from {', '.join(MODES)}",
                                  param_hint="--modes")
-    results = evaluate(run, des19, out, modes=modes, log=click.echo, onnx=onnx, oracle=oracle)
+    results = evaluate(run, des19, out, modes=modes, log=click.echo, onnx=onnx, oracle=oracle,
+                       known_flash=known_flash)
     if json_out:
         with open(json_out, "w") as f:
             json.dump(results, f, indent=1)
@@ -203,9 +234,12 @@ def cli(run, onnx, des19, out, json_out, threads, modes, record, oracle):
         path = os.path.join(onnx, "provenance.json")
         prov = read_json(path)
         prov["des19"] = {"full_chain": results["full"], "paper": results["paper"],
+                         **({"full_chain_known_flash": results["full_known_flash"]}
+                            if "full_known_flash" in results else {}),
                          "metric": "../shared/tools/score_maps.py (per-map RMSE; roughness as 0.9 r + 0.1); "
                                    "relight: mean RMSE of encoded renders under 9 lights",
-                         "command": f"python -m export.evaluate --onnx {onnx} --record"}
+                         "command": f"python -m export.evaluate --onnx {onnx} --record"
+                                    + (" --known-flash" if known_flash else "")}
         write_json(path, prov)
 
 

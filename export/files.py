@@ -8,6 +8,8 @@ import os
 import tempfile
 from pathlib import Path
 
+from svbrdf_cli.imageio import umask
+
 
 def shared_root() -> Path:
     """``$SVBRDF_SHARED``, else ``../shared`` beside the checkout (the rule of ``tests/conftest.py``)."""
@@ -26,6 +28,7 @@ def atomic_write(path, data: bytes):
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
+        os.chmod(tmp, 0o666 & ~umask())  # mkstemp makes it 0600
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):

@@ -18,7 +18,8 @@ from svbrdf_cli.errors import ImageReadError, ImageWriteError
 _FORMATS = {8: "uint8", 16: "uint16", 32: "float"}
 
 
-def _umask():
+def umask() -> int:
+    """The process umask (read without changing it), for files made by mkstemp/mkdtemp."""
     mask = os.umask(0)
     os.umask(mask)
     return mask
@@ -100,7 +101,7 @@ def write_image(path, pixels, bits=8):
         if not ok:
             raise ImageWriteError(f"Could not write '{path}': {oiio.geterror().strip()}.")
         # mkstemp creates 0600 files; give the result the mode a plain open() would.
-        os.chmod(tmp, 0o666 & ~_umask())
+        os.chmod(tmp, 0o666 & ~umask())
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):

@@ -245,12 +245,6 @@ def _check_options(bits, fmt, png_only=None):
         raise ValueError(f"The {png_only} preset writes PNG only; got fmt={fmt!r}.")
 
 
-def _umask():
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
 def _write_set(folder, write_files, force, extra=None):
     """Run ``write_files(tmp_folder) -> [names]`` and move the result to ``folder``.
 
@@ -281,7 +275,7 @@ def _write_set(folder, write_files, force, extra=None):
         names = write_files(tmp)
         if extra is not None:
             names = names + extra(tmp)
-        os.chmod(tmp, 0o777 & ~_umask())  # mkdtemp makes it 0700
+        os.chmod(tmp, 0o777 & ~imageio.umask())  # mkdtemp makes it 0700
         if os.path.exists(folder):
             old = tmp[: -len(".partial")] + ".old"
             os.rename(folder, old)
