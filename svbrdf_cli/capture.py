@@ -62,6 +62,7 @@ class Options:
     bits: int = 8
     fmt: str = "png"
     debug: bool = False
+    confidence: bool = False                   # also write confidence/<map>.png (svbrdf_cli.tta)
     preview: bool = True
     force: bool = False
 
@@ -167,6 +168,18 @@ def upsample_maps(stored, photo_low, photo_high, method="guided"):
     n[..., 2] = np.maximum(n[..., 2], 1e-3)  # stay in the upper hemisphere
     out["normal"] = cv.encode_normals(cv.normalize(n))
     return {k: v.clip(0.0, 1.0).astype(np.float32) for k, v in out.items()}
+
+
+def confidence_maps(chain, network_input, stored, side):
+    """{map: (side, side) confidence} from :data:`svbrdf_cli.tta.CONFIDENCE_PASSES` (``stored``: the plain pass)."""
+    import cv2
+
+    from svbrdf_cli import tta
+
+    rest = tta.CONFIDENCE_PASSES[1:]
+    conf = tta.confidence([stored] + tta.passes(chain, network_input, rest))
+    return {k: np.clip(cv2.resize(v, (side, side), interpolation=cv2.INTER_LINEAR), 0, 1) if v.shape[0] != side else v
+            for k, v in conf.items()}
 
 
 def output_size(opts, crop_side):
@@ -280,6 +293,11 @@ def capture(prepared, chain, out_root, opts, model_name="fast"):
     t2 = time.perf_counter()
     timings["upsample"] = t2 - t1
     timings["network"] = t1 - t0
+    conf = None
+    if opts.confidence:
+        conf = confidence_maps(chain, net_in, {k: out[k] for k in cv.MAP_NAMES}, side)
+        t3 = time.perf_counter()
+        timings["confidence"], t2 = t3 - t2, t3
 
     record = {
         "tool": f"svbrdf {__version__}",
@@ -296,12 +314,22 @@ def capture(prepared, chain, out_root, opts, model_name="fast"):
         "upsampling": opts.upsample if side != NETWORK_SIZE else None,
         "preset": opts.preset, "bits": opts.bits, "format": opts.fmt,
     }
+    if conf is not None:
+        from svbrdf_cli import tta
+
+        record["confidence"] = {"passes": len(tta.CONFIDENCE_PASSES), "half_at_disagreement": tta.CONFIDENCE_HALF,
+                                "mean": {k: round(float(v.mean()), 4) for k, v in conf.items()}}
 
     def extra(tmp):
         names = []
         if opts.preview:
             write_image(os.path.join(tmp, "preview.png"), preview_image(net_in, stored))
             names.append("preview.png")
+        if conf is not None:
+            os.makedirs(os.path.join(tmp, "confidence"))
+            for k, v in conf.items():
+                write_image(os.path.join(tmp, "confidence", f"{k}.png"), v[..., None])
+                names.append(f"confidence/{k}.png")
         if opts.debug:
             os.makedirs(os.path.join(tmp, "debug"))
             debug = {"input": net_in, **{k: out[k] for k in ("M_b", "M_h", "I_bf", "I_hr", "I_hr2")}}

@@ -89,6 +89,9 @@ def capture_options(f):
         click.option("--format", "fmt", type=click.Choice(["png", "exr"]), default="png", show_default=True,
                      help="File format of data maps (presets other than svbrdf and gltf)."),
         click.option("--debug", is_flag=True, help="Also write debug/: network input, masks, auxiliary renderings."),
+        click.option("--confidence", is_flag=True,
+                     help="Also write confidence/<map>.png: where the maps of rotated and mirrored copies of "
+                          "the photo agree (white) or not (dark). Runs the networks 5 times."),
         click.option("--no-preview", is_flag=True, help="Skip preview.png."),
         click.option("--threads", type=click.IntRange(0, 256), default=0,
                      help="onnxruntime threads (0: one per core)."),
@@ -244,7 +247,8 @@ def _quiet(ctx, quiet, verbose):
     return quiet
 
 
-def _options(preset, crop, corners, size, exposure, white_balance, upsample, bits, fmt, debug, no_preview, force):
+def _options(preset, crop, corners, size, exposure, white_balance, upsample, bits, fmt, debug, confidence, no_preview,
+             force):
     from svbrdf_cli.capture import Options
     from svbrdf_cli.presets import PNG_ONLY_PRESETS
 
@@ -252,7 +256,7 @@ def _options(preset, crop, corners, size, exposure, white_balance, upsample, bit
         raise click.UsageError(f"The {preset} preset writes PNG only; drop --format {fmt}.")
     return Options(preset=preset, crop=crop, corners=corners, size=size, exposure=exposure,
                    white_balance=white_balance, upsample=upsample, bits=int(bits), fmt=fmt, debug=debug,
-                   preview=not no_preview, force=force)
+                   confidence=confidence, preview=not no_preview, force=force)
 
 
 @click.command("capture")
@@ -260,7 +264,7 @@ def _options(preset, crop, corners, size, exposure, white_balance, upsample, bit
 @capture_options
 @click.pass_context
 def capture_cmd(ctx, inputs, output, model, preset, crop, corners, size, exposure, white_balance, upsample,
-                bits, fmt, debug, no_preview, threads, force, quiet, verbose):
+                bits, fmt, debug, confidence, no_preview, threads, force, quiet, verbose):
     """Turn flash photos into PBR texture sets.
 
     INPUTS are photos (JPEG, PNG, TIFF, EXR, camera RAW such as DNG, NEF, CR2,
@@ -276,7 +280,8 @@ def capture_cmd(ctx, inputs, output, model, preset, crop, corners, size, exposur
       svbrdf capture tiles.jpg -o textures --crop markers --preset gltf
       svbrdf capture leather.jpg -o textures --corners 410,220,1630,250,1600,1480,380,1450
     """
-    opts = _options(preset, crop, corners, size, exposure, white_balance, upsample, bits, fmt, debug, no_preview, force)
+    opts = _options(preset, crop, corners, size, exposure, white_balance, upsample, bits, fmt, debug, confidence,
+                    no_preview, force)
     files, ignored = collect_inputs(inputs)
     if not files:
         raise click.UsageError("no photos found in " + ", ".join(f"'{p}'" for p in inputs) + ".")
@@ -294,7 +299,7 @@ def capture_cmd(ctx, inputs, output, model, preset, crop, corners, size, exposur
               help="Ray workers, each with its own model (default: one per --threads CPUs of the cluster).")
 @click.pass_context
 def batch_cmd(ctx, folder, output, model, preset, crop, corners, size, exposure, white_balance, upsample,
-              bits, fmt, debug, no_preview, threads, force, quiet, verbose, engine, address, workers):
+              bits, fmt, debug, confidence, no_preview, threads, force, quiet, verbose, engine, address, workers):
     """Convert every photo in FOLDER; rerun to resume.
 
     Photos whose texture set is already complete in OUTPUT are skipped (so an
@@ -308,7 +313,8 @@ def batch_cmd(ctx, folder, output, model, preset, crop, corners, size, exposure,
       svbrdf batch shoot/ -o textures_ue --preset unreal --size 2048 -q
       svbrdf batch /mnt/shoot -o s3://studio/textures --engine ray --address ray://head:10001
     """
-    opts = _options(preset, crop, corners, size, exposure, white_balance, upsample, bits, fmt, debug, no_preview, force)
+    opts = _options(preset, crop, corners, size, exposure, white_balance, upsample, bits, fmt, debug, confidence,
+                    no_preview, force)
     files, ignored = collect_inputs([folder])
     quiet = _quiet(ctx, quiet, verbose)
     if not files:

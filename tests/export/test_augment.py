@@ -133,3 +133,19 @@ def test_colour_jitter_stays_physical():
 def test_hsv_round_trip():
     x = torch.rand(2, 3, 8, 8, generator=torch.Generator().manual_seed(1))
     assert torch.allclose(A.hsv_to_rgb(*A.rgb_to_hsv(x)), x, atol=1e-6)
+
+
+def test_runtime_tta_transforms_match_the_training_augmentation():
+    """svbrdf_cli.tta (numpy, the runtime) turns normals exactly as export.data.augment (torch) does."""
+    from svbrdf_cli import tta
+
+    g = torch.Generator().manual_seed(3)
+    n = cv.normalize(torch.randn(1, 3, 8, 8, generator=g) + torch.tensor([0, 0, 2.0]).reshape(1, 3, 1, 1), axis=1)
+    stored = {"normal": cv.encode_normals(n[0].permute(1, 2, 0).numpy()).astype(np.float32),
+              "diffuse": np.zeros((8, 8, 3), np.float32), "roughness": np.zeros((8, 8, 1), np.float32),
+              "specular": np.zeros((8, 8, 3), np.float32)}
+    for k, mirror in tta.DIHEDRAL:
+        ref = {"normal": n}
+        ref = A.rot90(A.flip(ref, True) if mirror else ref, k)["normal"][0].permute(1, 2, 0).numpy()
+        got = cv.decode_normals(tta.transform_maps(stored, k, mirror)["normal"])
+        np.testing.assert_allclose(got, ref, atol=1e-5)

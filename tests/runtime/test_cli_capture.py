@@ -66,6 +66,19 @@ def test_debug_and_presets(tmp_path):
     assert "preview.png" not in os.listdir(tmp_path / "gl" / "wood")
 
 
+def test_confidence_maps(tmp_path):
+    code, out = run("capture", SAMPLE, "-o", tmp_path, "--size", 256, "--confidence", "--no-preview")
+    assert code == 0, out
+    folder = tmp_path / "glazed_tiles"
+    assert sorted(os.listdir(folder / "confidence")) == sorted(f"{k}.png" for k in cv.MAP_NAMES)
+    rec = json.loads((folder / "material.json").read_text())
+    assert rec["confidence"]["passes"] == 5 and "confidence" in rec["timings_s"]
+    for k in cv.MAP_NAMES:
+        c = read_image(folder / "confidence" / f"{k}.png")
+        assert c.shape[:2] == (256, 256) and 0 <= c.min() < c.max() <= 1
+        assert abs(float(c.mean()) - rec["confidence"]["mean"][k]) < 0.01
+
+
 def test_existing_output_is_never_overwritten_without_force(tmp_path):
     photo = _photo(tmp_path / "a.png")
     assert run("capture", photo, "-o", tmp_path / "o")[0] == 0
