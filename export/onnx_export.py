@@ -24,7 +24,7 @@ import click
 import torch
 from torch import nn
 
-from export.nets.chain import STAGES
+from export.nets.chain import STAGES, VARIANTS
 from svbrdf_cli import conventions as cv
 
 OPSET = 19
@@ -55,11 +55,24 @@ class _Stage(nn.Module):
         return tuple(out[k] for k in outs)
 
 
-def export_stage(net, stage, path, size=256, metadata=None, half=False):
-    """Write one stage as ONNX (``half``: float16 weights, see :func:`store_float16`); returns the path."""
+def stage_io(net, stage):
+    """(input names, output names) of ``stage`` of ``net``; the end-to-end baseline's maps take the photo only."""
+    ins, outs = IO[stage]
+    if getattr(net, "variant", "chain") == "e2e":
+        ins = ("photo",)
+    return ins, outs
+
+
+def export_stage(net, stage, path, size=256, metadata=None, half=False, weights="float32"):
+    """Write one stage as ONNX; returns the path.
+
+    ``weights``: "float32", "float16" (:func:`store_float16`) or "int8"
+    (:func:`store_int8`); ``half=True`` is "float16".
+    """
     import onnx
 
-    ins, outs = IO[stage]
+    weights = "float16" if half else weights
+    ins, outs = stage_io(net, stage)
     module = _Stage(net.eval(), stage).eval()
     dummy = tuple(torch.rand(1, 3, size, size) for _ in ins)
     dyn = {n: {0: "batch", 2: "height", 3: "width"} for n in ins + tuple(outs)}
@@ -69,16 +82,17 @@ def export_stage(net, stage, path, size=256, metadata=None, half=False):
                           dynamic_axes=dyn, opset_version=OPSET, dynamo=False)
     model = onnx.load(tmp)
     meta = {"conventions": cv.CONVENTIONS_VERSION, "stage": stage, "tier": getattr(net, "tier", "custom"),
+            "variant": getattr(net, "variant", "chain"),
             "inputs": ",".join(ins), "outputs": ",".join(outs), "size_multiple": str(SIZE_MULTIPLE),
             "layout": "NCHW float32 in [0, 1]; maps in the stored encoding"}
     meta.update({k: v if isinstance(v, str) else json.dumps(v) for k, v in (metadata or {}).items()})
     for k, v in meta.items():
         p = model.metadata_props.add()
         p.key, p.value = k, v
-    if half:
-        store_float16(model)
+    if weights != "float32":
+        {"float16": store_float16, "int8": store_int8}[weights](model)
         p = model.metadata_props.add()
-        p.key, p.value = "weights", "float16 (computed in float32)"
+        p.key, p.value = "weights", f"{weights} (computed in float32)"
     onnx.save(model, tmp)
     os.replace(tmp, path)
     return path
@@ -112,7 +126,44 @@ def store_float16(model, min_elements=16):
     return model
 
 
-def export_run(run, out, size=256, half=True):
+def store_int8(model, min_elements=1024):
+    """Store conv and linear weights as int8, one scale per output channel, dequantised at load.
+
+    A quarter of the float32 file. Each weight tensor W becomes
+    ``DequantizeLinear(q, scale, 0, axis=0)`` with ``scale = max|W[c]| / 127``
+    per output channel ``c``; the arithmetic stays float32, so the only
+    change is the rounding of the weights (measure it on Des19 before using
+    it). Tensors under ``min_elements`` (biases, norms) stay float32.
+    """
+    import numpy as np
+    import onnx
+    from onnx import TensorProto, helper, numpy_helper
+
+    graph = model.graph
+    deq = []
+    for i, init in enumerate(list(graph.initializer)):
+        if init.data_type != TensorProto.FLOAT:
+            continue
+        w = numpy_helper.to_array(init)
+        if w.size < min_elements or w.ndim < 2:
+            continue
+        name = init.name
+        scale = (np.abs(w).reshape(w.shape[0], -1).max(1) / 127.0).astype(np.float32)
+        scale[scale == 0] = 1.0
+        q = np.clip(np.round(w / scale.reshape(-1, *([1] * (w.ndim - 1)))), -127, 127).astype(np.int8)
+        graph.initializer[i].CopyFrom(numpy_helper.from_array(q, name + "__q"))
+        graph.initializer.extend([numpy_helper.from_array(scale, name + "__scale"),
+                                  numpy_helper.from_array(np.zeros(w.shape[0], np.int8), name + "__zero")])
+        deq.append(helper.make_node("DequantizeLinear", [name + "__q", name + "__scale", name + "__zero"], [name],
+                                    axis=0, name=name + "__dequantize"))
+    nodes = deq + list(graph.node)
+    del graph.node[:]
+    graph.node.extend(nodes)
+    onnx.checker.check_model(model)
+    return model
+
+
+def export_run(run, out, size=256, half=True, weights=None):
     """Export every stage of a trained run (see :func:`export.train.load_trained`).
 
     Beside the models, ``provenance.json`` holds the run's provenance (data,
@@ -126,20 +177,23 @@ def export_run(run, out, size=256, half=True):
     from export.files import read_json, write_json
     from export.train import load_trained
 
+    weights = weights or ("float16" if half else "float32")
     net = load_trained(run)
     prov = read_json(os.path.join(run, "provenance.json"))
     os.makedirs(out, exist_ok=True)
-    paths = [export_stage(net, s, os.path.join(out, f"{s}.onnx"), size, {"provenance": prov}, half) for s in STAGES]
+    stages = VARIANTS[getattr(net, "variant", "chain")]
+    paths = [export_stage(net, s, os.path.join(out, f"{s}.onnx"), size, {"provenance": prov}, weights=weights)
+             for s in stages]
     files = {}
     for p in paths:
         with open(p, "rb") as f:
             files[os.path.basename(p)] = {"bytes": os.path.getsize(p), "sha256": hashlib.sha256(f.read()).hexdigest()}
     write_json(os.path.join(out, "provenance.json"), {
         "training": prov,
-        "export": {"opset": OPSET, "weights": "float16 storage, float32 compute" if half else "float32",
+        "export": {"opset": OPSET, "weights": f"{weights} storage, float32 compute",
                    "trace_size": size, "torch": torch.__version__, "conventions": cv.CONVENTIONS_VERSION,
                    "exported": time.strftime("%Y-%m-%dT%H:%M:%S"), "files": files,
-                   "command": f"python -m export.onnx_export --run {run} --out {out}" + ("" if half else " --float32")},
+                   "command": f"python -m export.onnx_export --run {run} --out {out} --weights {weights}"},
     })
     return paths
 
@@ -148,10 +202,12 @@ def export_run(run, out, size=256, half=True):
 @click.option("--run", type=click.Path(exists=True, file_okay=False), required=True)
 @click.option("--out", type=click.Path(file_okay=False), required=True)
 @click.option("--size", default=256, show_default=True, help="Trace size (the graphs stay size-dynamic).")
-@click.option("--float32", "full", is_flag=True, help="Keep float32 weights (default: float16 storage).")
-def cli(run, out, size, full):
+@click.option("--weights", type=click.Choice(["float16", "float32", "int8"]), default="float16", show_default=True,
+              help="How weights are stored (computation is float32 in every case).")
+@click.option("--float32", "full", is_flag=True, help="Same as --weights float32.")
+def cli(run, out, size, weights, full):
     """Export a trained run's stages to ONNX."""
-    for p in export_run(run, out, size, half=not full):
+    for p in export_run(run, out, size, weights="float32" if full else weights):
         click.echo(f"{p} ({os.path.getsize(p) / 1e6:.1f} MB)")
 
 

@@ -65,11 +65,14 @@ class Chain:
     def __init__(self, folder, threads=0):
         self.folder = os.fspath(folder)
         self.sessions, self.meta = {}, {}
-        missing = [f"{s}.onnx" for s in STAGES if not os.path.isfile(os.path.join(self.folder, f"{s}.onnx"))]
-        if missing:
+        # A chain has all three stages; a baseline export (the end-to-end network) only maps.onnx.
+        present = [s for s in STAGES if os.path.isfile(os.path.join(self.folder, f"{s}.onnx"))]
+        if "maps" not in present or present not in (list(STAGES), ["maps"]):
+            missing = [f"{s}.onnx" for s in STAGES if s not in present]
             raise ModelError(f"'{self.folder}' has no {', '.join(missing)}; export a trained run with "
                              "python -m export.onnx_export.")
-        for stage in STAGES:
+        self.stages = tuple(present)
+        for stage in self.stages:
             path = os.path.join(self.folder, f"{stage}.onnx")
             sess = _session(path, threads)
             meta = sess.get_modelmeta().custom_metadata_map
@@ -77,6 +80,13 @@ class Chain:
                 raise ModelError(f"'{path}' was made for conventions version {meta.get('conventions')!r}, "
                                  f"this tool uses {cv.CONVENTIONS_VERSION!r}; re-export it.")
             self.sessions[stage], self.meta[stage] = sess, meta
+        given = {"photo"}
+        for stage in self.stages:
+            need = set(self.meta[stage]["inputs"].split(",")) - given
+            if need:
+                raise ModelError(f"'{self.folder}': {stage}.onnx needs {', '.join(sorted(need))}, which no "
+                                 "earlier stage makes; re-export the run.")
+            given |= set(self.meta[stage]["outputs"].split(","))
         self.multiple = max(int(m.get("size_multiple", "32")) for m in self.meta.values())
         self.tier = self.meta["maps"].get("tier", "custom")
         # Which exported set this is: the SHA-256 of each file, from the export's provenance.json.
@@ -97,7 +107,8 @@ class Chain:
         return dict(zip(outs, res))
 
     def __call__(self, image):
-        """(H, W, 3) encoded image -> dict of HWC outputs (maps stored, plus masks and aux renderings).
+        """(H, W, 3) encoded image -> dict of HWC outputs (maps stored, plus masks and aux renderings
+        when the model has those stages).
 
         H and W are padded (by reflection) to the models' size multiple and
         the outputs cropped back.
@@ -110,9 +121,9 @@ class Chain:
         padded = np.pad(img, ((0, ph), (0, pw), (0, 0)), mode="reflect" if (ph < h and pw < w) else "edge")
         x = np.ascontiguousarray(padded.transpose(2, 0, 1)[None])
         feeds = {"photo": x}
-        for stage in STAGES:
+        for stage in self.stages:
             t0 = time.perf_counter()
             feeds.update(self._run(stage, feeds))
             self.timings[stage] = time.perf_counter() - t0
-        names = ("M_b", "M_h", "I_bf", "I_hr", "I_hr2") + cv.MAP_NAMES
+        names = [k for k in ("M_b", "M_h", "I_bf", "I_hr", "I_hr2") if k in feeds] + list(cv.MAP_NAMES)
         return {k: np.ascontiguousarray(feeds[k][0].transpose(1, 2, 0)[:h, :w]) for k in names}

@@ -84,3 +84,33 @@ def test_runtime_chain_refuses_other_conventions(tmp_path):
     (tmp_path / "maps.onnx").unlink()
     with pytest.raises(ModelError, match="maps.onnx"):
         Chain(tmp_path)
+
+
+def test_int8_weights_stay_close(tmp_path):
+    import os
+
+    torch.manual_seed(0)
+    net = SVBRDFNet(TINY, pretrained=False).eval()
+    full = export_stage(net, "maps", str(tmp_path / "f32.onnx"), size=64)
+    q = export_stage(net, "maps", str(tmp_path / "i8.onnx"), size=64, weights="int8")
+    assert os.path.getsize(q) < 0.4 * os.path.getsize(full)
+    feeds = {n: np.random.default_rng(i).random((1, 3, 64, 64), dtype=np.float32) for i, n in enumerate(IO["maps"][0])}
+    a = ort.InferenceSession(full, providers=["CPUExecutionProvider"]).run(None, feeds)
+    b = ort.InferenceSession(q, providers=["CPUExecutionProvider"]).run(None, feeds)
+    for x, y in zip(a, b):
+        assert 0 < np.abs(x - y).max() < 3e-2
+
+
+def test_end_to_end_baseline_exports_with_the_photo_only(tmp_path):
+    from export.nets.chain import EndToEndNet
+    from svbrdf_cli.inference import Chain
+
+    torch.manual_seed(0)
+    net = EndToEndNet("fast", base=8, depth=3).eval()
+    export_stage(net, "maps", str(tmp_path / "maps.onnx"), size=64)
+    img = np.random.default_rng(3).random((64, 64, 3), dtype=np.float32)
+    out = Chain(tmp_path)(img)
+    with torch.no_grad():
+        ref = net.run_maps(torch.from_numpy(img).permute(2, 0, 1)[None])
+    for k, v in ref.items():
+        assert np.abs(out[k] - v[0].permute(1, 2, 0).numpy()).max() < 1e-4

@@ -15,11 +15,32 @@ def test_a_model_is_shipped():
     assert "fast" in installed_tiers()
 
 
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+BASELINES = os.path.join(ROOT, "export", "baselines")
+
+
 def test_size_budget():
+    """Every model file under 25 MB; the shipped tiers and the committed baselines together under 60 MB."""
     sizes = {os.path.join(d, f): os.path.getsize(os.path.join(d, f))
-             for d, _, files in os.walk(MODELS_DIR) for f in files}
+             for top in (MODELS_DIR, BASELINES) for d, _, files in os.walk(top) for f in files}
     assert all(s < 25 * MB for s in sizes.values()), sizes
     assert sum(sizes.values()) < 60 * MB
+
+
+@pytest.mark.skipif(not os.path.isdir(os.path.join(BASELINES, "e2e-fast")), reason="no baseline export")
+def test_end_to_end_baseline_runs_with_its_one_stage():
+    import numpy as np
+
+    folder = os.path.join(BASELINES, "e2e-fast")
+    chain = Chain(folder)
+    assert chain.stages == ("maps",) and chain.meta["maps"]["variant"] == "e2e"
+    out = chain(np.random.default_rng(0).random((64, 96, 3), dtype=np.float32))
+    assert set(out) == {"normal", "diffuse", "roughness", "specular"} and out["normal"].shape == (64, 96, 3)
+    with open(os.path.join(folder, "provenance.json")) as f:
+        prov = json.load(f)
+    with open(os.path.join(folder, "maps.onnx"), "rb") as f:
+        assert hashlib.sha256(f.read()).hexdigest() == prov["export"]["files"]["maps.onnx"]["sha256"]
+    assert prov["training"]["stages"]["maps"]["variant"] == "e2e" and prov["des19"]["full_chain"]["normal"] > 0
 
 
 @pytest.mark.parametrize("tier", installed_tiers())

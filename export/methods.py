@@ -1,0 +1,62 @@
+"""The methods the benchmarks compare, behind one interface.
+
+A method maps an encoded (H, W, 3) network input to a stored map set (HWC,
+:mod:`svbrdf_cli.conventions`' encoding). :func:`available` lists what can be
+run here: every installed tier of the runtime chain (onnxruntime, exactly
+what ``svbrdf capture`` runs), the end-to-end baseline when its export is
+present, and the floor. The paper has no runnable model here; its published
+Des19 outputs are scored where the benchmarks need them.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from svbrdf_cli import conventions as cv
+
+#: Where exported baselines live (not shipped in the package: they are for comparison only).
+BASELINES_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "baselines")
+#: The paper's published time per image (GPU, 256²), quoted beside its accuracy.
+PAPER_GPU_SECONDS = 0.107
+
+
+class Floor:
+    """Flat normal, the input as diffuse, roughness 0.5, dielectric F0 = 0.04: what a method must beat."""
+
+    name, label = "floor", "floor (flat normal, input as diffuse, r = 0.5, F0 = 0.04)"
+
+    def __call__(self, image):
+        h, w = image.shape[:2]
+        spec = float(cv.albedo_to_stored(np.float32(0.04)))
+        return {"normal": np.broadcast_to(np.float32(cv.FLAT_NORMAL_ENCODED), (h, w, 3)).copy(),
+                "diffuse": np.asarray(image, np.float32).copy(),
+                "roughness": np.full((h, w, 1), 0.5, np.float32),
+                "specular": np.full((h, w, 3), spec, np.float32)}
+
+
+class Network:
+    """An exported model folder run by the runtime's :class:`svbrdf_cli.inference.Chain`."""
+
+    def __init__(self, name, folder, label=None, threads=0):
+        from svbrdf_cli.inference import Chain
+
+        self.name, self.label = name, label or name
+        self.chain = Chain(folder, threads=threads)
+
+    def __call__(self, image):
+        out = self.chain(image)
+        return {k: out[k] for k in cv.MAP_NAMES}
+
+
+def available(threads=0):
+    """Runnable methods, cheapest kind first: floor, the end-to-end baseline, every installed tier."""
+    from svbrdf_cli.inference import MODELS_DIR, installed_tiers
+
+    out = [Floor()]
+    e2e = os.path.join(BASELINES_DIR, "e2e-fast")
+    if os.path.isfile(os.path.join(e2e, "maps.onnx")):
+        out.append(Network("e2e", e2e, "end-to-end UNet (input -> maps, fast-tier parameters)", threads))
+    out += [Network(t, os.path.join(MODELS_DIR, t), f"chain, {t} tier", threads) for t in installed_tiers()]
+    return out
