@@ -210,8 +210,8 @@ def preview_image(network_input, stored, tile=256):
     for i, (name, img) in enumerate(tiles):
         r, c = divmod(i, 4)
         t = np.ascontiguousarray((img.clip(0, 1) * 255 + 0.5).astype(np.uint8))
-        cv2.putText(t, name, (5, tile - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 0), 2, cv2.LINE_AA)
-        cv2.putText(t, name, (5, tile - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1, cv2.LINE_AA)
+        t[-20:] = t[-20:] // 3  # a dark band under the label
+        cv2.putText(t, name, (5, tile - 6), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1, cv2.LINE_AA)
         grid[r * tile:(r + 1) * tile, c * tile:(c + 1) * tile] = t / np.float32(255)
     return grid
 

@@ -1,0 +1,341 @@
+"""Speed against accuracy, stability, and confidence: the figures of ``docs/benchmarks.md`` and ``docs/stability.md``.
+
+    python -m export.benchmark                 # everything (minutes on 2 cores), into docs/
+    python -m export.benchmark --limit 2       # a smoke run on 2 samples of each set
+
+For every runnable method (:mod:`export.methods`: the floor, the end-to-end
+baseline, each installed tier of the chain) it measures, in one run:
+
+* **Des19 accuracy**: the maps of each sample's ``input.png``, scored by the
+  paper's reference scorer ``../shared/tools/score_maps.py`` (per-map RMSE),
+  and the re-rendering RMSE under 9 lights (``export.evaluate``). The paper's
+  published outputs are scored the same way (accuracy only; its 0.107 s is
+  a GPU time).
+* **Real relighting** on ``../shared/data/real/card_blue_9lights``: maps from
+  photo 00 (as ``svbrdf capture --crop none`` would make them), rendered
+  under the 8 other photos' known light = camera positions with the one
+  light intensity that best reproduces photo 00, against those photos
+  (RMSE of encoded images, saturated pixels left out). The reference maps
+  shipped with the capture (optimised on all 9 photos by MaterialGAN) are
+  scored the same way.
+* **Time per image** of the whole chain on this CPU, median of ``--repeat``
+  runs: at 256² (network input to maps) and at 2048² (a 2048² linear crop
+  -> network input -> maps -> guided upsampling to 2048², as ``svbrdf
+  capture`` does it, without file input/output).
+
+It then runs the stability suite (:mod:`export.stability`) and the
+confidence evidence (does low confidence mark high error on Des19?) and
+writes ``speed_vs_accuracy.png``, ``stability_gallery.png`` and
+``benchmark.json`` into ``--figures`` and the tables into ``--tables``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import time
+
+import click
+import numpy as np
+import torch
+
+from export import methods as M
+from export.evaluate import load_des19, relight_rmse, score
+from export.files import shared_root
+from export.render.brdf import render
+from svbrdf_cli import conventions as cv
+from svbrdf_cli.mapset import stored_to_linear, write_map_set
+
+MAPS = cv.MAP_NAMES
+
+
+def _chw(maps):
+    return {k: torch.from_numpy(np.ascontiguousarray(v)).permute(2, 0, 1).float() for k, v in maps.items()}
+
+
+def des19_accuracy(method, samples, des19, out):
+    """{map: rmse (reference scorer), relight: mean 9-light RMSE} of ``method`` on Des19 samples."""
+    rel = []
+    for name, photo, gt in samples:
+        lin = stored_to_linear(method(photo.permute(1, 2, 0).numpy()))
+        write_map_set(os.path.join(out, name), lin)
+        rel.append(relight_rmse(_chw(lin), gt))
+    maps, _ = score(des19, out)
+    return {**maps, "relight": float(np.mean(rel))}
+
+
+def paper_accuracy(samples, des19):
+    """The paper's published Des19 outputs, scored like a method."""
+    from svbrdf_cli.imageio import read_image
+
+    maps, _ = score(des19, prefix="paper_")
+    rel = []
+    for name, _, gt in samples:
+        stored = {k: read_image(os.path.join(des19, name, f"paper_{k}.png")) for k in MAPS}
+        stored["roughness"] = stored["roughness"][..., :1]
+        rel.append(relight_rmse(_chw(stored_to_linear(stored)), gt))
+    return {**maps, "relight": float(np.mean(rel))}
+
+
+# --------------------------------------------------------------------------
+# The real 9-light capture
+# --------------------------------------------------------------------------
+
+class NineLights:
+    """``card_blue_9lights``: 9 rectified photos with known light = camera positions (cm)."""
+
+    def __init__(self, folder, size=256):
+        import cv2
+
+        from svbrdf_cli.imageio import read_image
+
+        with open(os.path.join(folder, "parameters.json")) as f:
+            p = json.load(f)
+        scale = 2 * cv.SURFACE_HALF_SIZE / p["image_size"]  # cm -> the conventions' units
+        self.lights = [tuple(float(c) * scale for c in pos) for pos in p["light_pos"]]
+        self.photos = [cv2.resize(read_image(os.path.join(folder, f"{i:02d}.jpg")), (size, size),
+                                  interpolation=cv2.INTER_AREA) for i in p["idx"]]
+        self.folder = folder
+
+    def network_input(self):
+        """Photo 00 as the tool feeds it to the networks (auto exposure)."""
+        from svbrdf_cli.capture import auto_exposure_gain
+        from svbrdf_cli.ingest import encode_for_network
+
+        lin = cv.image_to_linear(self.photos[0])
+        return encode_for_network(lin * np.float32(2.0 ** auto_exposure_gain(lin)))
+
+    def _render(self, lin, i):
+        m = {k: v[None] for k, v in _chw(lin).items()}
+        return render(m["normal"], m["diffuse"], m["roughness"], m["specular"], light=self.lights[i],
+                      camera=self.lights[i], intensity=1.0)[0].permute(1, 2, 0).numpy()
+
+    def relight_rmse(self, stored):
+        """Mean RMSE over photos 01-08 of renders lit as they were, at the intensity fitted on photo 00."""
+        lin = stored_to_linear(stored)
+        img, target = self._render(lin, 0), cv.image_to_linear(self.photos[0])
+        ok = (self.photos[0] < 0.98).all(-1)
+        k = float((img[ok] * target[ok]).sum() / max(float((img[ok] ** 2).sum()), 1e-12))
+        errs = []
+        for i in range(1, len(self.photos)):
+            ok = (self.photos[i] < 0.98).all(-1)
+            pred = cv.image_to_encoded(self._render(lin, i) * k)
+            errs.append(float(np.sqrt(((pred - self.photos[i])[ok] ** 2).mean())))
+        return float(np.mean(errs))
+
+    def reference_maps(self):
+        from svbrdf_cli.imageio import read_image
+
+        files = {"normal": "nom", "diffuse": "dif", "roughness": "rgh", "specular": "spe"}
+        stored = {k: read_image(os.path.join(self.folder, "reference_maps", f"{f}.png")) for k, f in files.items()}
+        stored["roughness"] = stored["roughness"][..., :1]
+        return stored
+
+
+# --------------------------------------------------------------------------
+# Time
+# --------------------------------------------------------------------------
+
+def _median_time(fn, repeat):
+    fn()  # warm-up (onnxruntime allocates its arenas on the first run)
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times))
+
+
+def timings(method, repeat=5, big=2048, seed=0):
+    """Seconds per image: the method at 256², and a ``big``² crop through the capture path to ``big``² maps."""
+    from svbrdf_cli.capture import NETWORK_SIZE, auto_exposure_gain, resize, upsample_maps
+    from svbrdf_cli.ingest import encode_for_network
+
+    rng = np.random.default_rng(seed)
+    small = rng.random((NETWORK_SIZE, NETWORK_SIZE, 3), dtype=np.float32)
+    crop = np.clip(resize(rng.random((64, 64, 3), dtype=np.float32) * 0.3, big)
+                   + rng.normal(0, 0.01, (big, big, 3)).astype(np.float32), 0, 1)
+
+    def whole():
+        low = resize(crop, NETWORK_SIZE)
+        gain = np.float32(2.0 ** auto_exposure_gain(low))
+        net_in = encode_for_network(low * gain)
+        return upsample_maps(method(net_in), net_in, encode_for_network(crop * gain), "guided")
+
+    return {"s_256": _median_time(lambda: method(small), repeat), f"s_{big}": _median_time(whole, repeat)}
+
+
+# --------------------------------------------------------------------------
+# Confidence evidence
+# --------------------------------------------------------------------------
+
+def _rank(x):
+    r = np.empty(len(x))
+    r[np.argsort(x, kind="stable")] = np.arange(len(x))
+    return r
+
+
+def confidence_evidence(chain, samples):
+    """Per map: Spearman correlation of (1 - confidence) with the per-pixel error, and the mean error
+    of the least and most confident tenth of Des19's pixels (the chain's plain pass)."""
+    from svbrdf_cli import tta
+
+    conf, err = {k: [] for k in MAPS}, {k: [] for k in MAPS}
+    for _, photo, gt in samples:
+        res = tta.passes(chain, photo.permute(1, 2, 0).numpy())
+        c = tta.confidence(res)
+        g = cv.encode_maps({k: v.permute(1, 2, 0).numpy() for k, v in gt.items()})
+        for k in MAPS:
+            p = res[0][k]
+            err[k].append(np.sqrt(((p - g[k][..., :p.shape[-1]]) ** 2).mean(-1)).ravel())
+            conf[k].append(c[k].ravel())
+    out = {}
+    for k in MAPS:
+        c, e = np.concatenate(conf[k]), np.concatenate(err[k])
+        lo, hi = np.quantile(c, [0.1, 0.9])
+        out[k] = {"spearman_uncertainty_error": float(np.corrcoef(_rank(-c), _rank(e))[0, 1]),
+                  "error_least_confident_10pct": float(e[c <= lo].mean()),
+                  "error_most_confident_10pct": float(e[c >= hi].mean()),
+                  "error_all": float(e.mean()), "mean_confidence": float(c.mean())}
+    return out
+
+
+# --------------------------------------------------------------------------
+# Figure and tables
+# --------------------------------------------------------------------------
+
+def pareto_figure(rows, path, big=2048):
+    """Time at 256² and ``big``² against the Des19 and real relighting errors, one point per method."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    panels = [("s_256", "des19_relight", "Des19: re-rendering RMSE (9 lights)"),
+              (f"s_{big}", "real_relight", "card_blue_9lights: relighting RMSE (8 held-out photos)")]
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    for ax, (tkey, akey, title) in zip(axes, panels):
+        pts = [(r[tkey], r[akey], r["name"]) for r in rows if r.get(tkey) and r.get(akey) is not None]
+        for t, a, name in pts:
+            ax.scatter([t], [a], s=40, zorder=3, marker="*" if name == "paper" else "o")
+            ax.annotate(name + (" (GPU, published)" if name == "paper" else ""), (t, a),
+                        textcoords="offset points", xytext=(6, 4), fontsize=8)
+        front, best = [], np.inf
+        for t, a, _ in sorted(pts):
+            if a < best:
+                front.append((t, a))
+                best = a
+        if len(front) > 1:
+            ax.step(*zip(*front), where="post", color="0.6", lw=1, zorder=1)
+        ax.set_xscale("log")
+        ax.set_xlabel(f"seconds per image at {tkey[2:]}² ({'network input to maps' if tkey == 's_256' else 'crop to upsampled maps'})")
+        ax.set_ylabel("RMSE (lower is better)")
+        ax.set_title(title, fontsize=10)
+        ax.grid(alpha=0.3, which="both")
+    fig.suptitle("Speed against accuracy on this CPU (2 cores); grey: the Pareto front", fontsize=10)
+    fig.tight_layout()
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _f(x, nd=4):
+    return "–" if x is None else f"{x:.{nd}f}"
+
+
+def speed_table(rows, big=2048):
+    head = ("| method | normal | diffuse | roughness | specular | Des19 relight | real relight | "
+            f"s @256² | s @{big}² |\n|---|---|---|---|---|---|---|---|---|\n")
+    lines = []
+    for r in rows:
+        t256 = r.get("s_256")
+        lines.append(f"| {r['label']} | " + " | ".join(_f(r.get(k)) for k in MAPS) + f" | {_f(r.get('des19_relight'))} | "
+                     f"{_f(r.get('real_relight'))} | {_f(t256, 3) if t256 else '–'}"
+                     f"{' (GPU)' if r['name'] == 'paper' else ''} | {_f(r.get(f's_{big}'), 3)} |")
+    return head + "\n".join(lines) + "\n"
+
+
+def confidence_table(ev):
+    head = ("| map | Spearman (1 − confidence, error) | error, least confident 10 % | error, most confident 10 % "
+            "| error, all | mean confidence |\n|---|---|---|---|---|---|\n")
+    return head + "\n".join(
+        f"| {k} | {v['spearman_uncertainty_error']:.2f} | {v['error_least_confident_10pct']:.4f} | "
+        f"{v['error_most_confident_10pct']:.4f} | {v['error_all']:.4f} | {v['mean_confidence']:.2f} |"
+        for k, v in ev.items()) + "\n"
+
+
+def run(limit=None, repeat=5, figures="docs/figures", tables="docs/tables", stability=True, log=print, threads=0):
+    """The whole benchmark; returns its results (also written as ``benchmark.json`` beside the figures)."""
+    from export import stability as S
+
+    root = shared_root() / "data"
+    des19 = str(root / "validation" / "des19")
+    if not os.path.isdir(des19):
+        raise click.ClickException(f"{des19}: Des19 validation samples not found (set SVBRDF_SHARED)")
+    samples = load_des19(des19)[:limit] if limit else load_des19(des19)
+    if limit:  # the reference scorer reads a whole folder: give it one with just these samples
+        sub = tempfile.mkdtemp(prefix="svbrdf-des19-")
+        for name, _, _ in samples:
+            os.symlink(os.path.join(des19, name), os.path.join(sub, name))
+        des19 = sub
+    nine = NineLights(str(root / "real" / "card_blue_9lights")) \
+        if os.path.isdir(root / "real" / "card_blue_9lights") else None
+    work = tempfile.mkdtemp(prefix="svbrdf-bench-")
+    rows = []
+    for method in M.available(threads):
+        r = {"name": method.name, "label": method.label}
+        r.update({f"{k}" if k in MAPS else "des19_relight": v
+                  for k, v in des19_accuracy(method, samples, des19, os.path.join(work, method.name)).items()})
+        if nine:
+            r["real_relight"] = nine.relight_rmse(method(nine.network_input()))
+        r.update(timings(method, repeat))
+        rows.append(r)
+        log(f"{method.name:6s} " + "  ".join(f"{k}={v:.4f}" for k, v in r.items() if isinstance(v, float)))
+    paper = {"name": "paper", "label": "paper (Des19 published outputs)", "s_256": M.PAPER_GPU_SECONDS}
+    paper.update({k if k in MAPS else "des19_relight": v for k, v in paper_accuracy(samples, des19).items()})
+    rows.append(paper)
+    if nine:
+        rows.append({"name": "reference", "label": "card_blue reference maps (MaterialGAN, fitted to all 9 photos)",
+                     "real_relight": nine.relight_rmse(nine.reference_maps())})
+    log(f"paper  " + "  ".join(f"{k}={v:.4f}" for k, v in paper.items() if isinstance(v, float)))
+    results = {"methods": rows, "samples": len(samples), "repeat": repeat, "cores": os.cpu_count()}
+
+    from svbrdf_cli.inference import Chain, MODELS_DIR, installed_tiers
+
+    tier = installed_tiers()[0]
+    chain = Chain(os.path.join(MODELS_DIR, tier), threads=threads)
+    results["confidence"] = {"tier": tier, "maps": confidence_evidence(chain, samples)}
+    os.makedirs(figures, exist_ok=True)
+    os.makedirs(tables, exist_ok=True)
+    pareto_figure(rows, os.path.join(figures, "speed_vs_accuracy.png"))
+    text = {"speed_vs_accuracy.md": speed_table(rows), "confidence.md": confidence_table(results["confidence"]["maps"])}
+    if stability:
+        results["stability"] = S.run(chain, samples, des19, root / "real", limit=limit,
+                                     gallery=os.path.join(figures, "stability_gallery.png"), log=log)
+        text["stability.md"] = S.table(results["stability"])
+    for name, t in text.items():
+        with open(os.path.join(tables, name), "w") as f:
+            f.write(t)
+        log(f"\n{name}\n{t}")
+    with open(os.path.join(tables, "benchmark.json"), "w") as f:
+        json.dump(results, f, indent=1)
+    return results
+
+
+@click.command()
+@click.option("--limit", type=int, default=None, help="Only the first N samples of each set (a smoke run).")
+@click.option("--repeat", default=5, show_default=True, help="Timed runs per method and size (median).")
+@click.option("--figures", default="docs/figures", show_default=True, type=click.Path(file_okay=False))
+@click.option("--tables", default="docs/tables", show_default=True, type=click.Path(file_okay=False),
+              help="Markdown tables and benchmark.json go here.")
+@click.option("--no-stability", is_flag=True, help="Skip the stability suite.")
+@click.option("--threads", default=0, help="onnxruntime threads (0: one per core).")
+def cli(limit, repeat, figures, tables, no_stability, threads):
+    """Speed against accuracy, the stability suite and the confidence evidence, in one run."""
+    torch.set_num_threads(max(1, os.cpu_count() or 1))
+    run(limit, repeat, figures, tables, not no_stability, log=click.echo, threads=threads)
+
+
+if __name__ == "__main__":
+    cli()
