@@ -98,6 +98,31 @@ def export_stage(net, stage, path, size=256, metadata=None, half=False, weights=
     return path
 
 
+def _store_weights(model, keep, encode):
+    """Replace each float32 initializer ``w`` with ``keep(w)`` by what ``encode(name, w)`` returns:
+    (stored initializers, the node that rebuilds ``name`` in float32 at load); nodes go first."""
+    import onnx
+    from onnx import TensorProto, numpy_helper
+
+    graph = model.graph
+    decoders = []
+    for i, init in enumerate(list(graph.initializer)):
+        if init.data_type != TensorProto.FLOAT:
+            continue
+        w = numpy_helper.to_array(init)
+        if not keep(w):
+            continue
+        stored, node = encode(init.name, w)  # ``init`` is the stored proto: use it before replacing it
+        graph.initializer[i].CopyFrom(stored[0])
+        graph.initializer.extend(stored[1:])
+        decoders.append(node)
+    nodes = decoders + list(graph.node)
+    del graph.node[:]
+    graph.node.extend(nodes)
+    onnx.checker.check_model(model)
+    return model
+
+
 def store_float16(model, min_elements=16):
     """Store float32 weights as float16 and cast them back to float32 at load.
 
@@ -105,25 +130,13 @@ def store_float16(model, min_elements=16):
     casts once per session), so the only change is float16 rounding of the
     weights. Small tensors (biases, shapes) stay float32.
     """
-    import onnx
     from onnx import TensorProto, helper, numpy_helper
 
-    graph = model.graph
-    casts = []
-    for i, init in enumerate(list(graph.initializer)):
-        if init.data_type != TensorProto.FLOAT:
-            continue
-        w = numpy_helper.to_array(init)
-        if w.size < min_elements:
-            continue
-        name = init.name  # ``init`` is the stored proto: read its name before replacing it
-        graph.initializer[i].CopyFrom(numpy_helper.from_array(w.astype("float16"), name + "__fp16"))
-        casts.append(helper.make_node("Cast", [name + "__fp16"], [name], to=TensorProto.FLOAT, name=name + "__cast"))
-    nodes = casts + list(graph.node)
-    del graph.node[:]
-    graph.node.extend(nodes)
-    onnx.checker.check_model(model)
-    return model
+    def encode(name, w):
+        return ([numpy_helper.from_array(w.astype("float16"), name + "__fp16")],
+                helper.make_node("Cast", [name + "__fp16"], [name], to=TensorProto.FLOAT, name=name + "__cast"))
+
+    return _store_weights(model, lambda w: w.size >= min_elements, encode)
 
 
 def store_int8(model, min_elements=1024):
@@ -136,31 +149,18 @@ def store_int8(model, min_elements=1024):
     it). Tensors under ``min_elements`` (biases, norms) stay float32.
     """
     import numpy as np
-    import onnx
-    from onnx import TensorProto, helper, numpy_helper
+    from onnx import helper, numpy_helper
 
-    graph = model.graph
-    deq = []
-    for i, init in enumerate(list(graph.initializer)):
-        if init.data_type != TensorProto.FLOAT:
-            continue
-        w = numpy_helper.to_array(init)
-        if w.size < min_elements or w.ndim < 2:
-            continue
-        name = init.name
+    def encode(name, w):
         scale = (np.abs(w).reshape(w.shape[0], -1).max(1) / 127.0).astype(np.float32)
         scale[scale == 0] = 1.0
         q = np.clip(np.round(w / scale.reshape(-1, *([1] * (w.ndim - 1)))), -127, 127).astype(np.int8)
-        graph.initializer[i].CopyFrom(numpy_helper.from_array(q, name + "__q"))
-        graph.initializer.extend([numpy_helper.from_array(scale, name + "__scale"),
-                                  numpy_helper.from_array(np.zeros(w.shape[0], np.int8), name + "__zero")])
-        deq.append(helper.make_node("DequantizeLinear", [name + "__q", name + "__scale", name + "__zero"], [name],
-                                    axis=0, name=name + "__dequantize"))
-    nodes = deq + list(graph.node)
-    del graph.node[:]
-    graph.node.extend(nodes)
-    onnx.checker.check_model(model)
-    return model
+        stored = [numpy_helper.from_array(q, name + "__q"), numpy_helper.from_array(scale, name + "__scale"),
+                  numpy_helper.from_array(np.zeros(w.shape[0], np.int8), name + "__zero")]
+        return stored, helper.make_node("DequantizeLinear", [t.name for t in stored], [name], axis=0,
+                                        name=name + "__dequantize")
+
+    return _store_weights(model, lambda w: w.size >= min_elements and w.ndim >= 2, encode)
 
 
 def export_run(run, out, size=256, half=True, weights=None):
