@@ -62,7 +62,7 @@ def des19_accuracy(method, samples, des19, out):
         write_map_set(os.path.join(out, name), lin)
         rel.append(relight_rmse(_chw(lin), gt))
     maps, _ = score(des19, out)
-    return {**maps, "relight": float(np.mean(rel))}
+    return {**maps, "relight": float(np.mean(rel)), "relight_per_sample": rel}
 
 
 def paper_accuracy(samples, des19):
@@ -202,6 +202,62 @@ def confidence_evidence(chain, samples):
 
 
 # --------------------------------------------------------------------------
+# Which network for which scene (groundwork for --model auto)
+# --------------------------------------------------------------------------
+
+#: Cheap per-photo signals: highlight-mask area (the masks stage, 0.02 s), saturated fraction and contrast (free).
+SIGNALS = ("highlight_mask", "saturated", "contrast")
+
+
+def _signals(chain, image):
+    return {"highlight_mask": float(chain(image)["M_h"].mean()), "saturated": float((image > 0.98).all(-1).mean()),
+            "contrast": float(image.std())}
+
+
+def scene_selection(chain, methods, samples, per_sample, generated=96, seed=12345):
+    """Could a cheap signal pick, per photo, the better of the end-to-end network and the chain?
+
+    On Des19 (per-sample relighting errors of the accuracy runs) and on
+    ``generated`` samples of our own data engine (fixed seed; relighting
+    error against their ground truth): the correlation of each signal with
+    (chain error - end-to-end error), and the error of always picking the
+    better one (the bound any selection rule can reach).
+    """
+    from export.data import dataset as D
+
+    net = {m.name: m for m in methods}
+    sets = {"des19": ([_signals(chain, p.permute(1, 2, 0).numpy()) for _, p, _ in samples],
+                      np.array(per_sample["e2e"]), np.array(per_sample[chain.tier]))}
+    g = torch.Generator().manual_seed(seed)
+    sig, e2e, ch = [], [], []
+    bank = D.SeedBank.find(None)
+    while len(sig) < generated:
+        batch = D.make_batch(g, min(8, generated - len(sig)), D.DataConfig(size=256, targets=()), seeds=bank)
+        for i in range(batch["photo"].shape[0]):
+            img = batch["photo"][i].permute(1, 2, 0).numpy()
+            gt = {k: batch[k][i] for k in MAPS}
+            sig.append(_signals(chain, img))
+            e2e.append(relight_rmse(_chw(stored_to_linear(net["e2e"](img))), gt))
+            ch.append(relight_rmse(_chw(stored_to_linear(net[chain.tier](img))), gt))
+    sets["generated"] = (sig, np.array(e2e), np.array(ch))
+    out = {}
+    for name, (sig, e, c) in sets.items():
+        out[name] = {"samples": len(e), "e2e": float(e.mean()), "chain": float(c.mean()),
+                     "better_of_two": float(np.minimum(e, c).mean()), "e2e_better": float((e < c).mean()),
+                     "correlation": {k: float(np.corrcoef([s[k] for s in sig], c - e)[0, 1]) for k in SIGNALS}}
+    return out
+
+
+def selection_table(sel):
+    head = ("| set | samples | end-to-end | chain | better of the two, per photo | end-to-end better on | "
+            + " | ".join(f"corr({k}, chain − e2e)" for k in SIGNALS) + " |\n|" + "---|" * (6 + len(SIGNALS)) + "\n")
+    return head + "\n".join(
+        f"| {k} | {v['samples']} | {v['e2e']:.4f} | {v['chain']:.4f} | {v['better_of_two']:.4f} | "
+        f"{100 * v['e2e_better']:.0f} % | " + " | ".join(f"{v['correlation'][s]:.2f}" for s in SIGNALS) + " |"
+        for k, v in sel.items()) + "\n"
+
+
+# --------------------------------------------------------------------------
 # Figure and tables
 # --------------------------------------------------------------------------
 
@@ -282,11 +338,13 @@ def run(limit=None, repeat=5, figures="docs/figures", tables="docs/tables", stab
     nine = NineLights(str(root / "real" / "card_blue_9lights")) \
         if os.path.isdir(root / "real" / "card_blue_9lights") else None
     work = tempfile.mkdtemp(prefix="svbrdf-bench-")
-    rows = []
-    for method in M.available(threads):
+    rows, per_sample = [], {}
+    methods = M.available(threads)
+    for method in methods:
         r = {"name": method.name, "label": method.label}
-        r.update({f"{k}" if k in MAPS else "des19_relight": v
-                  for k, v in des19_accuracy(method, samples, des19, os.path.join(work, method.name)).items()})
+        acc = des19_accuracy(method, samples, des19, os.path.join(work, method.name))
+        per_sample[method.name] = acc.pop("relight_per_sample")
+        r.update({k if k in MAPS else "des19_relight": v for k, v in acc.items()})
         if nine:
             r["real_relight"] = nine.relight_rmse(method(nine.network_input()))
         r.update(timings(method, repeat))
@@ -298,7 +356,7 @@ def run(limit=None, repeat=5, figures="docs/figures", tables="docs/tables", stab
     if nine:
         rows.append({"name": "reference", "label": "card_blue reference maps (MaterialGAN, fitted to all 9 photos)",
                      "real_relight": nine.relight_rmse(nine.reference_maps())})
-    log(f"paper  " + "  ".join(f"{k}={v:.4f}" for k, v in paper.items() if isinstance(v, float)))
+    log("paper  " + "  ".join(f"{k}={v:.4f}" for k, v in paper.items() if isinstance(v, float)))
     results = {"methods": rows, "samples": len(samples), "repeat": repeat, "cores": os.cpu_count()}
 
     from svbrdf_cli.inference import Chain, MODELS_DIR, installed_tiers
@@ -306,10 +364,15 @@ def run(limit=None, repeat=5, figures="docs/figures", tables="docs/tables", stab
     tier = installed_tiers()[0]
     chain = Chain(os.path.join(MODELS_DIR, tier), threads=threads)
     results["confidence"] = {"tier": tier, "maps": confidence_evidence(chain, samples)}
+    if "e2e" in per_sample:
+        results["scene_selection"] = scene_selection(chain, methods, samples, per_sample,
+                                                     generated=8 if limit else 96)
     os.makedirs(figures, exist_ok=True)
     os.makedirs(tables, exist_ok=True)
     pareto_figure(rows, os.path.join(figures, "speed_vs_accuracy.png"))
     text = {"speed_vs_accuracy.md": speed_table(rows), "confidence.md": confidence_table(results["confidence"]["maps"])}
+    if "scene_selection" in results:
+        text["scene_selection.md"] = selection_table(results["scene_selection"])
     if stability:
         results["stability"] = S.run(chain, samples, des19, root / "real", limit=limit,
                                      gallery=os.path.join(figures, "stability_gallery.png"), log=log)

@@ -52,5 +52,8 @@ def test_benchmark_runs_on_two_samples(shared_data, tmp_path):
     assert st["photos"] == {"des19": 2, "real": 2}
     for f in ("speed_vs_accuracy.png", "stability_gallery.png"):
         assert (tmp_path / "fig" / f).stat().st_size > 10_000
-    for f in ("speed_vs_accuracy.md", "stability.md", "confidence.md", "benchmark.json"):
+    sel = res["scene_selection"]
+    assert sel["des19"]["samples"] == 2 and sel["generated"]["samples"] == 8
+    assert sel["des19"]["better_of_two"] <= min(sel["des19"]["e2e"], sel["des19"]["chain"]) + 1e-9
+    for f in ("speed_vs_accuracy.md", "stability.md", "confidence.md", "scene_selection.md", "benchmark.json"):
         assert (tmp_path / "tab" / f).is_file()
