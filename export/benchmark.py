@@ -34,18 +34,18 @@ from __future__ import annotations
 import json
 import os
 import tempfile
-import time
 
 import click
 import numpy as np
 import torch
 
 from export import methods as M
-from export.evaluate import load_des19, relight_rmse, score
+from export.evaluate import fit_intensity, load_des19, relight_rmse, score, score_predictions
 from export.files import shared_root
-from export.render.brdf import render
+from export.render.brdf import render_maps
 from svbrdf_cli import conventions as cv
-from svbrdf_cli.mapset import stored_to_linear, write_map_set
+from svbrdf_cli.bench import median_seconds
+from svbrdf_cli.mapset import read_map_set, read_stored_maps, stored_to_linear
 
 MAPS = cv.MAP_NAMES
 
@@ -55,26 +55,17 @@ def _chw(maps):
 
 
 def des19_accuracy(method, samples, des19, out):
-    """{map: rmse (reference scorer), relight: mean 9-light RMSE} of ``method`` on Des19 samples."""
-    rel = []
-    for name, photo, gt in samples:
-        lin = stored_to_linear(method(photo.permute(1, 2, 0).numpy()))
-        write_map_set(os.path.join(out, name), lin)
-        rel.append(relight_rmse(_chw(lin), gt))
-    maps, _ = score(des19, out)
-    return {**maps, "relight": float(np.mean(rel)), "relight_per_sample": rel}
+    """({map: rmse (reference scorer), relight: mean 9-light RMSE}, per-sample relighting RMSEs) of ``method``."""
+    scores, rel, _, _ = score_predictions(samples, des19, out,
+                                          lambda name, photo: _chw(method(photo.permute(1, 2, 0).numpy())))
+    return scores, rel
 
 
 def paper_accuracy(samples, des19):
     """The paper's published Des19 outputs, scored like a method."""
-    from svbrdf_cli.imageio import read_image
-
     maps, _ = score(des19, prefix="paper_")
-    rel = []
-    for name, _, gt in samples:
-        stored = {k: read_image(os.path.join(des19, name, f"paper_{k}.png")) for k in MAPS}
-        stored["roughness"] = stored["roughness"][..., :1]
-        rel.append(relight_rmse(_chw(stored_to_linear(stored)), gt))
+    paper = {k: f"paper_{k}" for k in MAPS}
+    rel = [relight_rmse(_chw(read_map_set(os.path.join(des19, name), paper)), gt) for name, _, gt in samples]
     return {**maps, "relight": float(np.mean(rel))}
 
 
@@ -100,23 +91,18 @@ class NineLights:
 
     def network_input(self):
         """Photo 00 as the tool feeds it to the networks (auto exposure)."""
-        from svbrdf_cli.capture import auto_exposure_gain
-        from svbrdf_cli.ingest import encode_for_network
+        from svbrdf_cli.capture import network_input
 
-        lin = cv.image_to_linear(self.photos[0])
-        return encode_for_network(lin * np.float32(2.0 ** auto_exposure_gain(lin)))
+        return network_input(cv.image_to_linear(self.photos[0]))
 
     def _render(self, lin, i):
         m = {k: v[None] for k, v in _chw(lin).items()}
-        return render(m["normal"], m["diffuse"], m["roughness"], m["specular"], light=self.lights[i],
-                      camera=self.lights[i], intensity=1.0)[0].permute(1, 2, 0).numpy()
+        return render_maps(m, light=self.lights[i], camera=self.lights[i], intensity=1.0)[0].permute(1, 2, 0).numpy()
 
     def relight_rmse(self, stored):
         """Mean RMSE over photos 01-08 of renders lit as they were, at the intensity fitted on photo 00."""
         lin = stored_to_linear(stored)
-        img, target = self._render(lin, 0), cv.image_to_linear(self.photos[0])
-        ok = (self.photos[0] < 0.98).all(-1)
-        k = float((img[ok] * target[ok]).sum() / max(float((img[ok] ** 2).sum()), 1e-12))
+        k = fit_intensity(self._render(lin, 0), self.photos[0])
         errs = []
         for i in range(1, len(self.photos)):
             ok = (self.photos[i] < 0.98).all(-1)
@@ -125,27 +111,14 @@ class NineLights:
         return float(np.mean(errs))
 
     def reference_maps(self):
-        from svbrdf_cli.imageio import read_image
-
+        """The capture's reference maps (MaterialGAN's file names), as stored."""
         files = {"normal": "nom", "diffuse": "dif", "roughness": "rgh", "specular": "spe"}
-        stored = {k: read_image(os.path.join(self.folder, "reference_maps", f"{f}.png")) for k, f in files.items()}
-        stored["roughness"] = stored["roughness"][..., :1]
-        return stored
+        return read_stored_maps(os.path.join(self.folder, "reference_maps"), files)
 
 
 # --------------------------------------------------------------------------
 # Time
 # --------------------------------------------------------------------------
-
-def _median_time(fn, repeat):
-    fn()  # warm-up (onnxruntime allocates its arenas on the first run)
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times))
-
 
 def timings(method, repeat=5, big=2048, seed=0):
     """Seconds per image: the method at 256², and a ``big``² crop through the capture path to ``big``² maps."""
@@ -163,7 +136,7 @@ def timings(method, repeat=5, big=2048, seed=0):
         net_in = encode_for_network(low * gain)
         return upsample_maps(method(net_in), net_in, encode_for_network(crop * gain), "guided")
 
-    return {"s_256": _median_time(lambda: method(small), repeat), f"s_{big}": _median_time(whole, repeat)}
+    return {"s_256": median_seconds(lambda: method(small), repeat), f"s_{big}": median_seconds(whole, repeat)}
 
 
 # --------------------------------------------------------------------------
@@ -209,8 +182,9 @@ def confidence_evidence(chain, samples):
 SIGNALS = ("highlight_mask", "saturated", "contrast")
 
 
-def _signals(chain, image):
-    return {"highlight_mask": float(chain(image)["M_h"].mean()), "saturated": float((image > 0.98).all(-1).mean()),
+def _signals(image, chain_out):
+    """:data:`SIGNALS` of a network input, given the chain's outputs on it."""
+    return {"highlight_mask": float(chain_out["M_h"].mean()), "saturated": float((image > 0.98).all(-1).mean()),
             "contrast": float(image.std())}
 
 
@@ -226,7 +200,8 @@ def scene_selection(chain, methods, samples, per_sample, generated=96, seed=1234
     from export.data import dataset as D
 
     net = {m.name: m for m in methods}
-    sets = {"des19": ([_signals(chain, p.permute(1, 2, 0).numpy()) for _, p, _ in samples],
+    des19 = [p.permute(1, 2, 0).numpy() for _, p, _ in samples]
+    sets = {"des19": ([_signals(img, chain(img)) for img in des19],
                       np.array(per_sample["e2e"]), np.array(per_sample[chain.tier]))}
     g = torch.Generator().manual_seed(seed)
     sig, e2e, ch = [], [], []
@@ -236,9 +211,10 @@ def scene_selection(chain, methods, samples, per_sample, generated=96, seed=1234
         for i in range(batch["photo"].shape[0]):
             img = batch["photo"][i].permute(1, 2, 0).numpy()
             gt = {k: batch[k][i] for k in MAPS}
-            sig.append(_signals(chain, img))
+            out = chain(img)
+            sig.append(_signals(img, out))
             e2e.append(relight_rmse(_chw(stored_to_linear(net["e2e"](img))), gt))
-            ch.append(relight_rmse(_chw(stored_to_linear(net[chain.tier](img))), gt))
+            ch.append(relight_rmse(_chw(stored_to_linear({k: out[k] for k in MAPS})), gt))
     sets["generated"] = (sig, np.array(e2e), np.array(ch))
     out = {}
     for name, (sig, e, c) in sets.items():
@@ -342,8 +318,7 @@ def run(limit=None, repeat=5, figures="docs/figures", tables="docs/tables", stab
     methods = M.available(threads)
     for method in methods:
         r = {"name": method.name, "label": method.label}
-        acc = des19_accuracy(method, samples, des19, os.path.join(work, method.name))
-        per_sample[method.name] = acc.pop("relight_per_sample")
+        acc, per_sample[method.name] = des19_accuracy(method, samples, des19, os.path.join(work, method.name))
         r.update({k if k in MAPS else "des19_relight": v for k, v in acc.items()})
         if nine:
             r["real_relight"] = nine.relight_rmse(method(nine.network_input()))

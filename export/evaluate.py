@@ -119,6 +119,17 @@ def oracle_scale(pred_linear, gt_linear):
     return dict(pred_linear, diffuse=pred_linear["diffuse"] * k, specular=pred_linear["specular"] * k), k
 
 
+def fit_intensity(rendered, photo, channel_axis=-1):
+    """The light intensity that makes ``rendered`` (linear, at unit intensity) best reproduce ``photo``
+    (encoded): least squares in linear space over the photo's unsaturated pixels (numpy or torch)."""
+    ok = (photo < 0.98).all(channel_axis, keepdims=True) if isinstance(photo, np.ndarray) \
+        else (photo < 0.98).all(channel_axis, keepdim=True)
+    ok = ok.repeat(rendered.shape[channel_axis], channel_axis) if isinstance(ok, np.ndarray) else ok.expand_as(rendered)
+    lin = cv.image_to_linear(photo)
+    r, t = rendered[ok], lin[ok]
+    return float((r * t).sum()) / max(float((r * r).sum()), 1e-12)
+
+
 def known_flash_scale(pred_linear, photo, intensity=cv.LIGHT_INTENSITY):
     """Pred maps with diffuse and specular rescaled so that, rendered under a
     flash of the known ``intensity``, they reproduce the photo's brightness.
@@ -132,9 +143,7 @@ def known_flash_scale(pred_linear, photo, intensity=cv.LIGHT_INTENSITY):
     conventions' 2.91).
     """
     img = T.flash_image({k: v[None] for k, v in pred_linear.items()}, intensity=1.0)[0]
-    lin = cv.image_to_linear(photo)
-    ok = (photo < 0.98).all(0, keepdim=True).expand_as(img)
-    k = float((img[ok] * lin[ok]).sum() / (img[ok] ** 2).sum().clamp_min(1e-12)) / intensity
+    k = fit_intensity(img, photo, channel_axis=0) / intensity
     return dict(pred_linear, diffuse=(pred_linear["diffuse"] * k).clamp(0, 1),
                 specular=(pred_linear["specular"] * k).clamp(0, 1)), k
 
@@ -142,6 +151,26 @@ def known_flash_scale(pred_linear, photo, intensity=cv.LIGHT_INTENSITY):
 #: Post-hoc albedo rescalings of the ``full`` row: name -> (row suffix, f(linear maps, photo, gt) -> (maps, scale)).
 RESCALINGS = {"oracle": ("_oracle_scale", lambda lin, photo, gt: oracle_scale(lin, gt)),
               "known_flash": ("_known_flash", lambda lin, photo, gt: known_flash_scale(lin, photo))}
+
+
+def score_predictions(samples, des19, out, predict, rescale=None):
+    """Write predicted map sets under ``out`` and score them (reference scorer, 9-light relighting).
+
+    ``predict(name, photo) -> {map: stored (C, H, W) tensor}`` for each Des19
+    sample; ``rescale(linear maps, photo, gt) -> (maps, scale)`` is applied
+    after decoding when given. Returns ({map: rmse, "relight": mean}, per-sample
+    relighting RMSEs, scales, the scorer's line).
+    """
+    rel, scales = [], []
+    for name, photo, gt in samples:
+        lin = cv.decode_maps(predict(name, photo), axis=0)
+        if rescale:
+            lin, k = rescale(lin, photo, gt)
+            scales.append(k)
+        write_map_set(os.path.join(out, name), {k: v.permute(1, 2, 0).numpy() for k, v in lin.items()})
+        rel.append(relight_rmse(lin, gt))
+    maps, line = score(des19, out)
+    return {**maps, "relight": float(np.mean(rel))}, rel, scales, line
 
 
 def evaluate(run=None, des19=None, out=None, modes=MODES, log=print, onnx=None, oracle=False, known_flash=False):
@@ -166,26 +195,32 @@ def evaluate(run=None, des19=None, out=None, modes=MODES, log=print, onnx=None, 
         if any(m != "full" for m in modes) else {}
     out = out or tempfile.mkdtemp(prefix="svbrdf-eval-")
     results = {}
-    extra = [RESCALINGS[r] for r, on in (("oracle", oracle), ("known_flash", known_flash)) if on and "full" in modes]
-    for mode, rescale in [(m, None) for m in modes] + [("full" + suffix, f) for suffix, f in extra]:
-        rel, scales = [], []
-        for name, photo, gt in samples:
+    full = {}  # the full chain's maps per sample, shared by the rescaled rows
+
+    def predictor(mode):
+        def f(name, photo):
+            if mode == "full" and name in full:
+                return full[name]
             if onnx:
                 res = chain(photo.permute(1, 2, 0).numpy())
                 pred = {k: torch.from_numpy(res[k]).permute(2, 0, 1) for k in cv.MAP_NAMES}
             else:
-                pred = predict(net, photo, "full" if rescale else mode, inter.get(name))
-            lin = cv.decode_maps({k: pred[k] for k in cv.MAP_NAMES}, axis=0)
-            if rescale:
-                lin, k = rescale(lin, photo, gt)
-                scales.append(k)
-            write_map_set(os.path.join(out, mode, name), {k: v.permute(1, 2, 0).numpy() for k, v in lin.items()})
-            rel.append(relight_rmse(lin, gt))
-        maps, line = score(des19, os.path.join(out, mode))
-        results[mode] = {**maps, "relight": float(np.mean(rel)), "samples": len(samples)}
+                pred = predict(net, photo, mode, inter.get(name))
+            pred = {k: pred[k] for k in cv.MAP_NAMES}
+            if mode == "full":
+                full[name] = pred
+            return pred
+        return f
+
+    extra = [RESCALINGS[r] for r, on in (("oracle", oracle), ("known_flash", known_flash)) if on and "full" in modes]
+    for mode, rescale in [(m, None) for m in modes] + [("full" + suffix, f) for suffix, f in extra]:
+        scores, _, scales, line = score_predictions(samples, des19, os.path.join(out, mode),
+                                                    predictor("full" if rescale else mode), rescale)
+        results[mode] = {**scores, "samples": len(samples)}
         if scales:
             results[mode]["scale_median"] = float(np.median(scales))
-        log(f"{mode:9s} {line}  relight={np.mean(rel):.4f}" + (f"  median scale={np.median(scales):.3f}" if scales else ""))
+        log(f"{mode:9s} {line}  relight={scores['relight']:.4f}"
+            + (f"  median scale={np.median(scales):.3f}" if scales else ""))
     paper, line = score(des19, prefix="paper_")
     results["paper"] = paper
     log(f"{'paper':9s} {line}")

@@ -24,7 +24,7 @@ import click
 import torch
 from torch import nn
 
-from export.nets.chain import STAGES, VARIANTS
+from export.nets.chain import VARIANTS
 from svbrdf_cli import conventions as cv
 
 OPSET = 19

@@ -28,13 +28,13 @@ import os
 import tempfile
 
 import numpy as np
-import torch
 
 from export.evaluate import score
 from export.render import targets as T
-from export.render.brdf import render
+from export.render.brdf import render_maps
 from svbrdf_cli import conventions as cv
 from svbrdf_cli import tta
+from svbrdf_cli.capture import network_input
 from svbrdf_cli.mapset import stored_to_linear, write_map_set
 
 MAPS = cv.MAP_NAMES
@@ -92,15 +92,6 @@ PERTURBATIONS = {
 }
 
 
-def network_input(linear):
-    """The tool's path from a linear square crop to the networks' input (auto exposure, encoding)."""
-    from svbrdf_cli.capture import NETWORK_SIZE, auto_exposure_gain, resize
-    from svbrdf_cli.ingest import encode_for_network
-
-    low = resize(np.ascontiguousarray(linear, dtype=np.float32), NETWORK_SIZE)
-    return encode_for_network(low * np.float32(2.0 ** auto_exposure_gain(low)))
-
-
 def rendered_photo(gt, variant):
     """A linear photo of ground-truth maps: centred flash, flash off centre, or no flash."""
     m = {k: v[None] for k, v in gt.items()}
@@ -108,16 +99,14 @@ def rendered_photo(gt, variant):
     if variant == "centred":
         img = T.flash_image(m, intensity=1.0)
     elif variant == "off_centre":
-        img = render(m["normal"], m["diffuse"], m["roughness"], m["specular"], light=(0.7, -0.5, h),
-                     camera=cv.FLASH_POSITION, intensity=1.0)
+        img = render_maps(m, light=(0.7, -0.5, h), camera=cv.FLASH_POSITION, intensity=1.0)
     elif variant == "no_flash":  # a ring of 12 distant lamps, 40-65 degrees up: soft light, no hot spot
         img = 0
         for i, a in enumerate(np.linspace(0, 2 * np.pi, 12, endpoint=False)):
             elev = np.radians(40 + 25 * (i % 2))
             d = 50.0
             pos = (d * np.cos(elev) * np.cos(a), d * np.cos(elev) * np.sin(a), d * np.sin(elev))
-            img = img + render(m["normal"], m["diffuse"], m["roughness"], m["specular"], light=pos,
-                               camera=cv.FLASH_POSITION, intensity=d * d / 12)
+            img = img + render_maps(m, light=pos, camera=cv.FLASH_POSITION, intensity=d * d / 12)
     else:
         raise ValueError(variant)
     return img[0].permute(1, 2, 0).numpy()
@@ -163,7 +152,7 @@ def run(chain, des19_samples, des19_dir, real_root, limit=None, gallery=None, lo
     def infer(name, label, image, geom=None):
         x = image if geom is None else tta.transform_image(image, *geom)
         try:
-            out = chain(network_input(x))
+            out = chain(network_input(x))  # svbrdf capture's own path: auto exposure, encoding
             maps = {k: out[k] for k in MAPS}
         except Exception as e:  # noqa: BLE001 -- the suite records every failure instead of stopping
             failures.append({"perturbation": label, "sample": name, "error": f"{type(e).__name__}: {e}"})
@@ -176,15 +165,11 @@ def run(chain, des19_samples, des19_dir, real_root, limit=None, gallery=None, lo
     # Clean references.
     clean = {n: infer(n, "clean", lin) for n, lin, _ in des19}
     clean.update({n: infer(n, "clean", lin) for n, lin in real})
-    rendered = {}
-    for n, _, gt in des19:
-        photo = rendered_photo(gt, "centred")
-        rendered[n] = (photo, infer(n, "clean (rendered)", photo))
+    rendered = {n: infer(n, "clean (rendered)", rendered_photo(gt, "centred")) for n, _, gt in des19}
     for n, _, _ in des19:
-        if clean[n] is not None:
-            write_map_set(os.path.join(work, "clean", n), stored_to_linear(clean[n]))
-        if rendered[n][1] is not None:
-            write_map_set(os.path.join(work, "clean_rendered", n), stored_to_linear(rendered[n][1]))
+        for sub, maps in (("clean", clean[n]), ("clean_rendered", rendered[n])):
+            if maps is not None:
+                write_map_set(os.path.join(work, sub, n), stored_to_linear(maps))
     scores = {"clean": score(des19_dir, os.path.join(work, "clean"))[0],
               "clean_rendered": score(des19_dir, os.path.join(work, "clean_rendered"))[0]}
 
@@ -192,11 +177,11 @@ def run(chain, des19_samples, des19_dir, real_root, limit=None, gallery=None, lo
     for label, (geom, photometric, variant) in PERTURBATIONS.items():
         changes = {"des19": [], "real": []}
         folder = os.path.join(work, label.replace(" ", "_").replace("/", "_"))
-        sets = [("des19", n, lin) for n, lin, _ in des19] + ([] if variant else [("real", n, lin) for n, lin in real])
-        for kind, n, lin in sets:
+        sets = [("des19", n, lin, gt) for n, lin, gt in des19] \
+            + ([] if variant else [("real", n, lin, None) for n, lin in real])
+        for kind, n, lin, gt in sets:
             if variant:
-                gt = next(g for d, _, g in des19 if d == n)
-                src, ref = rendered_photo(gt, variant), rendered[n][1]
+                src, ref = rendered_photo(gt, variant), rendered[n]
             else:
                 src, ref = (lin if photometric is None else photometric(lin, rng)), clean[n]
             maps = infer(n, label, src, geom)
@@ -215,7 +200,7 @@ def run(chain, des19_samples, des19_dir, real_root, limit=None, gallery=None, lo
             row["des19"] = score(des19_dir, folder)[0]
         rows[label] = row
         log(f"{label:32s} change " + " ".join(f"{k}={v:.4f}" for k, v in (row["change"] or {}).items())
-            + (f"  des19 " + " ".join(f"{k}={v:.4f}" for k, v in row.get("des19", {}).items())))
+            + ("  des19 " + " ".join(f"{k}={v:.4f}" for k, v in row.get("des19", {}).items())))
     if gallery and examples:
         worst = {}
         for e in sorted(examples, key=lambda e: -e[0]):

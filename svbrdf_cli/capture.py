@@ -170,15 +170,21 @@ def upsample_maps(stored, photo_low, photo_high, method="guided"):
     return {k: v.clip(0.0, 1.0).astype(np.float32) for k, v in out.items()}
 
 
-def confidence_maps(chain, network_input, stored, side):
-    """{map: (side, side) confidence} from :data:`svbrdf_cli.tta.CONFIDENCE_PASSES` (``stored``: the plain pass)."""
-    import cv2
+def network_input(linear, gain_ev=None):
+    """A linear square crop -> what the networks take: :data:`NETWORK_SIZE`², exposed by ``gain_ev``
+    stops (None: :func:`auto_exposure_gain`), encoded."""
+    low = resize(linear, NETWORK_SIZE)
+    if gain_ev is None:
+        gain_ev = auto_exposure_gain(low)
+    return ingest.encode_for_network(low * np.float32(2.0 ** gain_ev))
 
+
+def confidence_maps(chain, net_in, stored, side):
+    """{map: (side, side) confidence} from :data:`svbrdf_cli.tta.CONFIDENCE_PASSES` (``stored``: the plain pass)."""
     from svbrdf_cli import tta
 
-    rest = tta.CONFIDENCE_PASSES[1:]
-    conf = tta.confidence([stored] + tta.passes(chain, network_input, rest))
-    return {k: np.clip(cv2.resize(v, (side, side), interpolation=cv2.INTER_LINEAR), 0, 1) if v.shape[0] != side else v
+    conf = tta.confidence([stored] + tta.passes(chain, net_in, tta.CONFIDENCE_PASSES[1:]))
+    return {k: v if v.shape[0] == side else np.clip(_resize_to(v[..., None], (side, side))[..., 0], 0, 1)
             for k, v in conf.items()}
 
 
@@ -278,7 +284,7 @@ def capture(prepared, chain, out_root, opts, model_name="fast"):
     timings = dict(p.timings)
     gain = np.float32(2.0 ** p.gain_ev)
     t0 = time.perf_counter()
-    net_in = ingest.encode_for_network(resize(p.crop.image, NETWORK_SIZE) * gain)
+    net_in = network_input(p.crop.image, p.gain_ev)
     out = chain(net_in)
     timings.update({f"network_{k}": v for k, v in chain.timings.items()})
     t1 = time.perf_counter()
@@ -296,8 +302,8 @@ def capture(prepared, chain, out_root, opts, model_name="fast"):
     conf = None
     if opts.confidence:
         conf = confidence_maps(chain, net_in, {k: out[k] for k in cv.MAP_NAMES}, side)
-        t3 = time.perf_counter()
-        timings["confidence"], t2 = t3 - t2, t3
+        timings["confidence"] = time.perf_counter() - t2
+        t2 = time.perf_counter()  # "write" starts here
 
     record = {
         "tool": f"svbrdf {__version__}",

@@ -29,26 +29,31 @@ def linear_to_stored(maps):
     return out
 
 
-def read_map_set(folder):
-    """Read a native map set.
+def read_stored_maps(folder, names=None):
+    """Read a map set's four images as stored (encoded), without decoding them.
 
     Args:
         folder: directory holding the four PNGs (other image extensions
             OpenImageIO reads are accepted: ``.tif``, ``.exr``).
+        names: optional {map: file stem} for sets named otherwise (e.g.
+            ``paper_normal``); default: the map names.
 
     Returns:
-        dict of linear HWC float32 maps.
+        dict of stored-encoding HWC float32 maps (grey diffuse/specular as RGB).
 
     Raises:
         MapSetError: a map is missing, or their sizes differ.
     """
     folder = os.fspath(folder)
+    names = names or {n: n for n in cv.MAP_NAMES}
     stored = {}
     for name in cv.MAP_NAMES:
-        path = next((os.path.join(folder, name + ext) for ext in (".png", ".tif", ".tiff", ".exr")
-                     if os.path.isfile(os.path.join(folder, name + ext))), None)
+        stem = names[name]
+        path = next((os.path.join(folder, stem + ext) for ext in (".png", ".tif", ".tiff", ".exr")
+                     if os.path.isfile(os.path.join(folder, stem + ext))), None)
         if path is None:
-            raise MapSetError(f"'{folder}' has no {name}.png; a map set needs {', '.join(n + '.png' for n in cv.MAP_NAMES)}.")
+            raise MapSetError(f"'{folder}' has no {stem}.png; a map set needs "
+                              f"{', '.join(names[n] + '.png' for n in cv.MAP_NAMES)}.")
         img = read_image(path)
         if img.shape[-1] == 1 and name != "roughness":
             img = np.repeat(img, 3, axis=-1)
@@ -57,7 +62,12 @@ def read_map_set(folder):
     if len(set(shapes.values())) != 1:
         raise MapSetError(f"Maps in '{folder}' differ in size: "
                           + ", ".join(f"{k} {w}x{h}" for k, (h, w) in shapes.items()) + ". Resize them to match.")
-    return stored_to_linear(stored)
+    return stored
+
+
+def read_map_set(folder, names=None):
+    """Read a native map set (see :func:`read_stored_maps`) as linear HWC float32 maps."""
+    return stored_to_linear(read_stored_maps(folder, names))
 
 
 def write_map_set(folder, maps, bits=8):
