@@ -36,7 +36,7 @@ import torch
 
 from export.files import shared_root
 from export.render import targets as T
-from export.render.brdf import render
+from export.render.brdf import render, render_maps
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.imageio import read_image
 from svbrdf_cli.mapset import read_map_set, write_map_set
@@ -138,11 +138,11 @@ def known_flash_scale(pred_linear, photo, intensity=cv.LIGHT_INTENSITY):
     are fitted (least squares over unsaturated pixels) by the predicted maps'
     flash rendering at unit intensity; the fitted intensity over the known one
     is the albedo scale. This is what a capture with a calibrated flash and
-    fixed exposure allows; Des19's inputs are such captures (fitting the
-    renderer to its ground truth gives a median intensity of 3.0 against the
-    conventions' 2.91).
+    fixed exposure allows. Des19's inputs are not such captures: its ground
+    truth needs a median intensity of 42 (0.3 to 856 across samples) to
+    reproduce its inputs under our renderer, against the conventions' 2.91.
     """
-    img = T.flash_image({k: v[None] for k, v in pred_linear.items()}, intensity=1.0)[0]
+    img = render_maps({k: v[None] for k, v in pred_linear.items()}, intensity=1.0)[0]  # linear, unit flash
     k = fit_intensity(img, photo, channel_axis=0) / intensity
     return dict(pred_linear, diffuse=(pred_linear["diffuse"] * k).clamp(0, 1),
                 specular=(pred_linear["specular"] * k).clamp(0, 1)), k

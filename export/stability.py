@@ -30,7 +30,6 @@ import tempfile
 import numpy as np
 
 from export.evaluate import score
-from export.render import targets as T
 from export.render.brdf import render_maps
 from svbrdf_cli import conventions as cv
 from svbrdf_cli import tta
@@ -97,7 +96,7 @@ def rendered_photo(gt, variant):
     m = {k: v[None] for k, v in gt.items()}
     h = cv.CAMERA_HEIGHT
     if variant == "centred":
-        img = T.flash_image(m, intensity=1.0)
+        img = render_maps(m, intensity=1.0)
     elif variant == "off_centre":
         img = render_maps(m, light=(0.7, -0.5, h), camera=cv.FLASH_POSITION, intensity=1.0)
     elif variant == "no_flash":  # a ring of 12 distant lamps, 40-65 degrees up: soft light, no hot spot
