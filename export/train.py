@@ -33,7 +33,7 @@ import torch
 from export import losses as L
 from export.data import dataset as D
 from export.files import atomic_torch_save, read_json, write_json
-from export.nets.chain import STAGES, TIERS, VARIANTS, build
+from export.nets.chain import ALL_TIERS, STAGES, VARIANTS, build, tier_variant
 from svbrdf_cli import conventions as cv
 
 #: Ground truth each stage needs from the data engine.
@@ -317,7 +317,8 @@ def load_trained(out, tier=None, device="cpu", stages=STAGES):
 
 @click.command()
 @click.option("--stage", type=click.Choice(STAGES + ("all",)), default="all", show_default=True)
-@click.option("--tier", type=click.Choice(tuple(TIERS)), default="fast", show_default=True)
+@click.option("--tier", type=click.Choice(ALL_TIERS), default="fast", show_default=True,
+              help="lite: one small end-to-end UNet; fast, balanced, best: the chain at three widths.")
 @click.option("--out", type=click.Path(file_okay=False), default=None, help="Run folder (default runs/<tier>).")
 @click.option("--steps", type=int, default=None, help="Steps per stage (split for --stage all).")
 @click.option("--minutes", type=float, default=None, help="Time budget instead of --steps (split for --stage all).")
@@ -332,9 +333,9 @@ def load_trained(out, tier=None, device="cpu", stages=STAGES):
 @click.option("--val-every", default=100, show_default=True)
 @click.option("--shared", type=click.Path(file_okay=False), default=None,
               help="Shared data folder with materials/ (CC0 seeds); default ../shared/data.")
-@click.option("--variant", type=click.Choice(tuple(VARIANTS)), default="chain", show_default=True,
+@click.option("--variant", type=click.Choice(tuple(VARIANTS)), default=None,
               help="chain: the paper's model; nomask / e2e: Table IV ablations (aux without masks; "
-                   "one UNet from photo to maps with the chain's parameter count).")
+                   "one UNet from photo to maps with the chain's parameter count). Default: the tier's own.")
 def cli(stage, tier, out, steps, minutes, batch, size, device, seed, threads, fresh, no_adversarial,
         checkpoint_every, val_every, shared, variant):
     """Train the model stage by stage."""
@@ -342,7 +343,11 @@ def cli(stage, tier, out, steps, minutes, batch, size, device, seed, threads, fr
         torch.set_num_threads(threads)
     if size % 32:
         raise click.BadParameter("must be a multiple of 32", param_hint="--size")
-    out = out or os.path.join("runs", tier if variant == "chain" else f"{tier}-{variant}")
+    try:
+        variant = tier_variant(tier, variant)
+    except ValueError as e:
+        raise click.BadParameter(str(e), param_hint="--variant") from None
+    out = out or os.path.join("runs", tier if variant == tier_variant(tier) else f"{tier}-{variant}")
     bank = D.SeedBank.find(shared)
     cfg = RunConfig(tier=tier, size=size, batch=batch, seed=seed, device=device, adversarial=not no_adversarial,
                     variant=variant)

@@ -13,7 +13,9 @@ encoding (:func:`svbrdf_cli.conventions.encode_maps`): normals xyz*0.5+0.5
 (renormalised), diffuse and specular gamma-encoded, roughness linear. Every
 input is centred to [-1, 1] for the UNets; the backbone normalises its own.
 
-Tiers scale every network's width; :func:`build` makes one.
+Tiers scale every network's width; :func:`build` makes one. The ``lite``
+tier (:data:`E2E_TIERS`) is not a chain: one small UNet from the photo to
+the maps, the cheapest model ``svbrdf capture --model auto`` starts from.
 
 Two ablations of the paper's Table IV are variants of the same interface
 (``run_masks``, ``run_aux``, ``run_maps``, ``stage``), so training,
@@ -57,6 +59,19 @@ TIERS = {
     "balanced": Tier(mask_width=0.5, aux_base=32, map_base=32),
     "best": Tier(mask_width=1.0, aux_base=48, map_base=48),
 }
+#: Tiers that are one end-to-end UNet of this base width (the ``e2e`` variant, no intermediate targets).
+E2E_TIERS = {"lite": 16}
+#: Every tier, cheapest first.
+ALL_TIERS = tuple(E2E_TIERS) + tuple(TIERS)
+
+
+def tier_variant(tier, variant=None):
+    """The variant a tier trains: its own for an end-to-end tier, else ``variant`` (default: the chain)."""
+    if tier in E2E_TIERS:
+        if variant not in (None, "e2e"):
+            raise ValueError(f"the {tier} tier is an end-to-end network; it has no {variant!r} variant")
+        return "e2e"
+    return variant or "chain"
 
 
 def _centre(x):
@@ -160,15 +175,19 @@ class EndToEndNet(nn.Module):
 
 
 def e2e_base(tier="fast"):
-    """UNet width giving the end-to-end baseline the chain's parameter count."""
+    """UNet width of an end-to-end ``tier``; for a chain tier, the width giving the chain's parameter count."""
     from export.nets.cost import count_parameters
+
+    if tier in E2E_TIERS:
+        return E2E_TIERS[tier]
 
     target = count_parameters(SVBRDFNet(tier, pretrained=False))
     return min(range(8, 129, 4), key=lambda b: abs(count_parameters(UNet(3, 10, base=b)) - target))
 
 
-def build(tier="fast", pretrained=True, variant="chain"):
-    """A network of ``variant`` (a key of :data:`VARIANTS`)."""
+def build(tier="fast", pretrained=True, variant=None):
+    """A network of ``tier`` and ``variant`` (a key of :data:`VARIANTS`; default: the tier's own)."""
+    variant = tier_variant(tier, variant) if isinstance(tier, str) else (variant or "chain")
     if variant == "e2e":
         return EndToEndNet(tier)
     if variant not in VARIANTS:
@@ -177,10 +196,13 @@ def build(tier="fast", pretrained=True, variant="chain"):
 
 
 def tier_costs(size=256):
-    """{tier: {stage: (parameters, MACs)}} for one sample at ``size``² (the whole chain's cost)."""
+    """{tier: {stage: (parameters, MACs)}} for one sample at ``size``² (an end-to-end tier has one stage, maps)."""
     from export.nets.cost import count_macs, count_parameters
 
     out = {}
+    for name in E2E_TIERS:
+        net = EndToEndNet(name)
+        out[name] = {"maps": (count_parameters(net), count_macs(net, (torch.zeros(1, 3, size, size),)))}
     for name in TIERS:
         net = SVBRDFNet(name, pretrained=False)
         x = torch.zeros(1, 3, size, size)
