@@ -1,10 +1,10 @@
-"""Speed against accuracy, stability, and confidence: the figures of ``docs/benchmarks.md`` and ``docs/stability.md``.
+"""Speed against accuracy, --model auto, stability, and confidence: the figures of ``docs/benchmarks.md`` and ``docs/stability.md``.
 
     python -m export.benchmark                 # everything (minutes on 2 cores), into docs/
     python -m export.benchmark --limit 2       # a smoke run on 2 samples of each set
 
 For every runnable method (:mod:`export.methods`: the floor, the end-to-end
-baseline, each installed tier of the chain) it measures, in one run:
+baseline, each installed tier, ``--model auto``) it measures, in one run:
 
 * **Des19 accuracy**: the maps of each sample's ``input.png``, scored by the
   paper's reference scorer ``../shared/tools/score_maps.py`` (per-map RMSE),
@@ -23,10 +23,13 @@ baseline, each installed tier of the chain) it measures, in one run:
   -> network input -> maps -> guided upsampling to 2048², as ``svbrdf
   capture`` does it, without file input/output).
 
-It then runs the stability suite (:mod:`export.stability`) and the
-confidence evidence (does low confidence mark high error on Des19?) and
-writes ``speed_vs_accuracy.png``, ``stability_gallery.png`` and
-``benchmark.json`` into ``--figures`` and the tables into ``--tables``.
+It then runs the auto evidence (:func:`export.auto.evidence`: the shipped
+rule against each tier on Des19, ``card_blue_9lights`` and the real photos,
+with time per photo measured on those photos), the stability suite
+(:mod:`export.stability`) and the confidence evidence (does low confidence
+mark high error on Des19?) and writes ``speed_vs_accuracy.png``,
+``stability_gallery.png`` and ``benchmark.json`` into ``--figures`` and the
+tables into ``--tables``.
 """
 
 from __future__ import annotations
@@ -40,6 +43,7 @@ import numpy as np
 import torch
 
 from export import methods as M
+from export.auto import calibration_table, evidence as auto_evidence, evidence_table as auto_table
 from export.evaluate import fit_intensity, load_des19, relight_rmse, score, score_predictions
 from export.files import shared_root
 from export.render.brdf import render_maps
@@ -175,65 +179,6 @@ def confidence_evidence(chain, samples):
 
 
 # --------------------------------------------------------------------------
-# Which network for which scene (groundwork for --model auto)
-# --------------------------------------------------------------------------
-
-#: Cheap per-photo signals: highlight-mask area (the masks stage, 0.02 s), saturated fraction and contrast (free).
-SIGNALS = ("highlight_mask", "saturated", "contrast")
-
-
-def _signals(image, chain_out):
-    """:data:`SIGNALS` of a network input, given the chain's outputs on it."""
-    return {"highlight_mask": float(chain_out["M_h"].mean()), "saturated": float((image > 0.98).all(-1).mean()),
-            "contrast": float(image.std())}
-
-
-def scene_selection(chain, methods, samples, per_sample, generated=96, seed=12345):
-    """Could a cheap signal pick, per photo, the better of the end-to-end network and the chain?
-
-    On Des19 (per-sample relighting errors of the accuracy runs) and on
-    ``generated`` samples of our own data engine (fixed seed; relighting
-    error against their ground truth): the correlation of each signal with
-    (chain error - end-to-end error), and the error of always picking the
-    better one (the bound any selection rule can reach).
-    """
-    from export.data import dataset as D
-
-    net = {m.name: m for m in methods}
-    des19 = [p.permute(1, 2, 0).numpy() for _, p, _ in samples]
-    sets = {"des19": ([_signals(img, chain(img)) for img in des19],
-                      np.array(per_sample["e2e"]), np.array(per_sample[chain.tier]))}
-    g = torch.Generator().manual_seed(seed)
-    sig, e2e, ch = [], [], []
-    bank = D.SeedBank.find(None)
-    while len(sig) < generated:
-        batch = D.make_batch(g, min(8, generated - len(sig)), D.DataConfig(size=256, targets=()), seeds=bank)
-        for i in range(batch["photo"].shape[0]):
-            img = batch["photo"][i].permute(1, 2, 0).numpy()
-            gt = {k: batch[k][i] for k in MAPS}
-            out = chain(img)
-            sig.append(_signals(img, out))
-            e2e.append(relight_rmse(_chw(stored_to_linear(net["e2e"](img))), gt))
-            ch.append(relight_rmse(_chw(stored_to_linear({k: out[k] for k in MAPS})), gt))
-    sets["generated"] = (sig, np.array(e2e), np.array(ch))
-    out = {}
-    for name, (sig, e, c) in sets.items():
-        out[name] = {"samples": len(e), "e2e": float(e.mean()), "chain": float(c.mean()),
-                     "better_of_two": float(np.minimum(e, c).mean()), "e2e_better": float((e < c).mean()),
-                     "correlation": {k: float(np.corrcoef([s[k] for s in sig], c - e)[0, 1]) for k in SIGNALS}}
-    return out
-
-
-def selection_table(sel):
-    head = ("| set | samples | end-to-end | chain | better of the two, per photo | end-to-end better on | "
-            + " | ".join(f"corr({k}, chain − e2e)" for k in SIGNALS) + " |\n|" + "---|" * (6 + len(SIGNALS)) + "\n")
-    return head + "\n".join(
-        f"| {k} | {v['samples']} | {v['e2e']:.4f} | {v['chain']:.4f} | {v['better_of_two']:.4f} | "
-        f"{100 * v['e2e_better']:.0f} % | " + " | ".join(f"{v['correlation'][s]:.2f}" for s in SIGNALS) + " |"
-        for k, v in sel.items()) + "\n"
-
-
-# --------------------------------------------------------------------------
 # Figure and tables
 # --------------------------------------------------------------------------
 
@@ -249,10 +194,13 @@ def pareto_figure(rows, path, big=2048):
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
     for ax, (tkey, akey, title) in zip(axes, panels):
         pts = [(r[tkey], r[akey], r["name"]) for r in rows if r.get(tkey) and r.get(akey) is not None]
-        for t, a, name in pts:
+        span = max(a for _, a, _ in pts) - min(a for _, a, _ in pts) or 1.0
+        for i, (t, a, name) in enumerate(pts):
             ax.scatter([t], [a], s=40, zorder=3, marker="*" if name == "paper" else "o")
+            # Auto sits on the tier it picks: stack the labels of points that (nearly) coincide.
+            near = sum(abs(np.log(t / t2)) < 0.2 and abs(a - a2) < 0.03 * span for t2, a2, _ in pts[:i])
             ax.annotate(name + (" (GPU, published)" if name == "paper" else ""), (t, a),
-                        textcoords="offset points", xytext=(6, 4), fontsize=8)
+                        textcoords="offset points", xytext=(6, 4 - 11 * near), fontsize=8)
         front, best = [], np.inf
         for t, a, _ in sorted(pts):
             if a < best:
@@ -334,20 +282,23 @@ def run(limit=None, repeat=5, figures="docs/figures", tables="docs/tables", stab
     log("paper  " + "  ".join(f"{k}={v:.4f}" for k, v in paper.items() if isinstance(v, float)))
     results = {"methods": rows, "samples": len(samples), "repeat": repeat, "cores": os.cpu_count()}
 
-    from svbrdf_cli.inference import Chain, MODELS_DIR, installed_tiers
+    from svbrdf_cli.capture import network_input
+    from svbrdf_cli.inference import DEFAULT_MODEL, Chain, model_folder
 
-    tier = installed_tiers()[0]
-    chain = Chain(os.path.join(MODELS_DIR, tier), threads=threads)
+    tier = DEFAULT_MODEL  # what svbrdf capture runs unless told otherwise
+    chain = Chain(model_folder(tier), threads=threads)
     results["confidence"] = {"tier": tier, "maps": confidence_evidence(chain, samples)}
-    if "e2e" in per_sample:
-        results["scene_selection"] = scene_selection(chain, methods, samples, per_sample,
-                                                     generated=8 if limit else 96)
+    rule = M.auto_rule()
+    if rule is not None:
+        real = [network_input(lin) for _, lin in S.real_crops(root / "real", limit or S.REAL_PHOTOS)] \
+            if os.path.isdir(root / "real") else []
+        results["auto"] = {"rule": rule, "sets": auto_evidence(rule, samples, nine, real, log=log)}
     os.makedirs(figures, exist_ok=True)
     os.makedirs(tables, exist_ok=True)
     pareto_figure(rows, os.path.join(figures, "speed_vs_accuracy.png"))
     text = {"speed_vs_accuracy.md": speed_table(rows), "confidence.md": confidence_table(results["confidence"]["maps"])}
-    if "scene_selection" in results:
-        text["scene_selection.md"] = selection_table(results["scene_selection"])
+    if "auto" in results:
+        text["auto.md"] = auto_table(results["auto"]["sets"], rule["ladder"]) + "\n" + calibration_table(rule)
     if stability:
         results["stability"] = S.run(chain, samples, des19, root / "real", limit=limit,
                                      gallery=os.path.join(figures, "stability_gallery.png"), log=log)

@@ -2,9 +2,9 @@
 
 A method maps an encoded (H, W, 3) network input to a stored map set (HWC,
 :mod:`svbrdf_cli.conventions`' encoding). :func:`available` lists what can be
-run here: every installed tier of the runtime chain (onnxruntime, exactly
-what ``svbrdf capture`` runs), the end-to-end baseline when its export is
-present, and the floor. The paper has no runnable model here; its published
+run here: every installed tier (onnxruntime, exactly what ``svbrdf capture``
+runs), ``--model auto`` when its rule is installed, the end-to-end baseline
+when its export is present, and the floor. The paper has no runnable model here; its published
 Des19 outputs are scored where the benchmarks need them.
 """
 
@@ -20,6 +20,7 @@ from svbrdf_cli import conventions as cv
 BASELINES_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "baselines")
 #: The paper's published time per image (GPU, 256²), quoted beside its accuracy.
 PAPER_GPU_SECONDS = 0.107
+TIER_LABELS = {"lite": "lite tier (one small end-to-end UNet)"}
 
 
 class Floor:
@@ -50,13 +51,43 @@ class Network:
         return {k: out[k] for k in cv.MAP_NAMES}
 
 
+class Auto:
+    """``--model auto`` (:class:`svbrdf_cli.auto.AutoModel`) with the shipped rule."""
+
+    name, label = "auto", "auto (per photo, the cheapest tier the shipped rule finds good enough)"
+
+    def __init__(self, rule, threads=0):
+        from svbrdf_cli.auto import AutoModel
+
+        self.model = AutoModel(rule, threads=threads)
+
+    def __call__(self, image):
+        out = self.model(image)
+        return {k: out[k] for k in cv.MAP_NAMES}
+
+
+def auto_rule():
+    """The shipped ``--model auto`` rule, or None when it or a tier it needs is not installed."""
+    from svbrdf_cli.auto import load_rule
+    from svbrdf_cli.inference import ModelError
+
+    try:
+        return load_rule()
+    except ModelError:
+        return None
+
+
 def available(threads=0):
-    """Runnable methods, cheapest kind first: floor, the end-to-end baseline, every installed tier."""
+    """Runnable methods, cheapest kind first: floor, the end-to-end baseline, every installed tier, auto."""
     from svbrdf_cli.inference import MODELS_DIR, installed_tiers
 
     out = [Floor()]
     e2e = os.path.join(BASELINES_DIR, "e2e-fast")
     if os.path.isfile(os.path.join(e2e, "maps.onnx")):
         out.append(Network("e2e", e2e, "end-to-end UNet (input -> maps, fast-tier parameters)", threads))
-    out += [Network(t, os.path.join(MODELS_DIR, t), f"chain, {t} tier", threads) for t in installed_tiers()]
+    out += [Network(t, os.path.join(MODELS_DIR, t), TIER_LABELS.get(t, f"chain, {t} tier"), threads)
+            for t in installed_tiers()]
+    rule = auto_rule()
+    if rule is not None:
+        out.append(Auto(rule, threads))
     return out

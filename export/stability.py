@@ -128,7 +128,7 @@ def real_photos(real_root, count=REAL_PHOTOS):
     return files[::step][:count]
 
 
-def _real_crops(real_root, count):
+def real_crops(real_root, count):
     from svbrdf_cli import ingest, rectify
     from svbrdf_cli.capture import NETWORK_SIZE, resize
 
@@ -144,7 +144,7 @@ def run(chain, des19_samples, des19_dir, real_root, limit=None, gallery=None, lo
     real photos; returns {"rows": {name: stats}, "clean": Des19 scores, "failures": [...], "photos": counts}."""
     rng = np.random.default_rng(seed)
     des19 = [(n, cv.image_to_linear(p.permute(1, 2, 0).numpy()).astype(np.float32), gt) for n, p, gt in des19_samples]
-    real = _real_crops(real_root, limit or REAL_PHOTOS) if os.path.isdir(real_root) else []
+    real = real_crops(real_root, limit or REAL_PHOTOS) if os.path.isdir(real_root) else []
     work = tempfile.mkdtemp(prefix="svbrdf-stability-")
     failures, examples = [], []
 

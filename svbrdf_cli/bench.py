@@ -46,16 +46,16 @@ def _synthetic_photo(path, width=4000, height=3000):
 def _one(photo, size, repeat, upsample, model, threads):
     """In this process: run the job ``repeat`` times; returns timings and peak memory."""
     from svbrdf_cli import capture as C
-    from svbrdf_cli.inference import Chain, model_folder
+    from svbrdf_cli.inference import load_model
 
-    chain = Chain(model_folder(model), threads=threads)
+    chain = load_model(model, threads=threads)
     opts = C.Options(size=size, upsample=upsample, force=True)
     runs = []
     with tempfile.TemporaryDirectory() as out:
         for _ in range(repeat + 1):  # the first run warms up onnxruntime
             t0 = time.perf_counter()
             prepared = C.prepare(photo, opts)
-            _, rec = C.capture(prepared, chain, out, opts)
+            _, rec = C.capture(prepared, chain, out, opts, model_name=model)
             t = dict(rec["timings_s"], total=time.perf_counter() - t0)
             runs.append(t)
     runs = runs[1:]
@@ -77,9 +77,9 @@ def median_seconds(fn, repeat):
 def _networks_only(model, threads, repeat):
     import numpy as np
 
-    from svbrdf_cli.inference import Chain, model_folder
+    from svbrdf_cli.inference import load_model
 
-    chain = Chain(model_folder(model), threads=threads)
+    chain = load_model(model, threads=threads)
     x = np.random.default_rng(0).uniform(0, 1, (256, 256, 3)).astype(np.float32)
     return {"timings": {"total": median_seconds(lambda: chain(x), repeat)},
             "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}

@@ -301,7 +301,7 @@ def capture(prepared, chain, out_root, opts, model_name="fast"):
     timings["network"] = t1 - t0
     conf = None
     if opts.confidence:
-        conf = confidence_maps(chain, net_in, {k: out[k] for k in cv.MAP_NAMES}, side)
+        conf = confidence_maps(chain.used, net_in, {k: out[k] for k in cv.MAP_NAMES}, side)
         timings["confidence"] = time.perf_counter() - t2
         t2 = time.perf_counter()  # "write" starts here
 
@@ -311,8 +311,7 @@ def capture(prepared, chain, out_root, opts, model_name="fast"):
         "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         "input": {"file": os.path.abspath(p.path), "sha256": file_sha256(p.path), "kind": p.photo.kind,
                   "bits": p.photo.bits, "width": int(p.photo.linear.shape[1]), "height": int(p.photo.linear.shape[0])},
-        "model": {"name": model_name, "tier": chain.tier, "folder": os.path.abspath(chain.folder),
-                  "sha256_16": chain.files},
+        "model": {"name": model_name, **chain.describe()},
         "crop": _jsonable(p.crop.report),
         "exposure": {"mode": "auto" if opts.exposure is None else "manual", "stops": round(p.gain_ev, 3)},
         "white_balance": list(opts.white_balance) if opts.white_balance else None,

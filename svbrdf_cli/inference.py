@@ -24,7 +24,12 @@ STAGES = ("masks", "aux", "maps")
 
 #: Shipped model sets live here, one folder per tier.
 MODELS_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "models")
-TIERS = ("fast", "balanced", "best")
+#: Tiers, cheapest first: ``lite`` is one end-to-end UNet (maps.onnx only), the others the three-stage chain.
+TIERS = ("lite", "fast", "balanced", "best")
+#: What ``svbrdf capture`` runs without ``--model``.
+DEFAULT_MODEL = "fast"
+#: ``--model auto``: per photo, the cheapest installed tier good enough for it (:mod:`svbrdf_cli.auto`).
+AUTO = "auto"
 
 
 class ModelError(SvbrdfError):
@@ -42,8 +47,11 @@ def _session(path, threads):
 
 
 def installed_tiers():
-    """Tiers whose three models are in :data:`MODELS_DIR`."""
-    return [t for t in TIERS if all(os.path.isfile(os.path.join(MODELS_DIR, t, f"{s}.onnx")) for s in STAGES)]
+    """Tiers whose models are in :data:`MODELS_DIR` (all three stages, or ``maps.onnx`` alone), cheapest first."""
+    def complete(t):
+        have = [os.path.isfile(os.path.join(MODELS_DIR, t, f"{s}.onnx")) for s in STAGES]
+        return all(have) or have == [False, False, True]
+    return [t for t in TIERS if complete(t)]
 
 
 def model_folder(model):
@@ -56,7 +64,28 @@ def model_folder(model):
         return os.path.join(MODELS_DIR, model)
     if os.path.isdir(model):
         return model
-    raise ModelError(f"--model '{model}' is neither a tier ({', '.join(TIERS)}) nor a folder of exported models.")
+    raise ModelError(f"--model '{model}' is neither a tier ({', '.join(TIERS)}), 'auto', "
+                     "nor a folder of exported models.")
+
+
+def load_model(model, threads=0):
+    """What ``--model`` names, ready to run: a :class:`Chain`, or for ``auto`` an
+    :class:`svbrdf_cli.auto.AutoModel` (same call interface)."""
+    if model == AUTO:
+        from svbrdf_cli.auto import AutoModel
+
+        return AutoModel(threads=threads)
+    return Chain(model_folder(model), threads=threads)
+
+
+def check_model(model):
+    """Raise :class:`ModelError` now if ``model`` cannot be loaded (cheap: no session is made)."""
+    if model == AUTO:
+        from svbrdf_cli.auto import load_rule
+
+        load_rule()
+    else:
+        model_folder(model)
 
 
 class Chain:
@@ -99,6 +128,15 @@ class Chain:
                 files = json.load(f).get("export", {}).get("files", {})
             self.files = {k: v.get("sha256", "")[:16] for k, v in files.items()}
         self.timings = {}  # seconds of each stage in the last call
+
+    @property
+    def used(self):
+        """The model that made the last outputs (for a chain, itself; see :class:`svbrdf_cli.auto.AutoModel`)."""
+        return self
+
+    def describe(self):
+        """What ``material.json`` records of the model."""
+        return {"tier": self.tier, "folder": os.path.abspath(self.folder), "sha256_16": self.files}
 
     def _run(self, stage, feeds):
         meta = self.meta[stage]

@@ -108,9 +108,9 @@ class CaptureWorker:
     """One Ray actor: a model chain loaded once, then photos one by one (``map_batches``)."""
 
     def __init__(self, model, opts, output, threads=1):
-        from svbrdf_cli.inference import Chain, model_folder
+        from svbrdf_cli.inference import load_model
 
-        self.chain = Chain(model_folder(model), threads=threads)
+        self.chain = load_model(model, threads=threads)
         self.model, self.opts, self.store = model, opts, Store(output)
 
     def _one(self, path):
@@ -169,10 +169,10 @@ def run_ray(files, output, opts, model, address=None, workers=None, threads_per_
         for name in ("ray", "ray.data"):
             logging.getLogger(name).setLevel(logging.ERROR if quiet else logging.WARNING)
     from svbrdf_cli.cli.capture import _clean_partials, plan_inputs
-    from svbrdf_cli.inference import model_folder
+    from svbrdf_cli.inference import check_model
 
     store = Store(output)
-    model_folder(model)  # fail early, on the driver, for a model that is not installed
+    check_model(model)  # fail early, on the driver, for a model that is not installed
     todo, skipped, failed = plan_inputs(files, output, opts, skip_done, err, store=store)
     if not todo:
         return 0, skipped, failed

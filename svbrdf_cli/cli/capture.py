@@ -16,6 +16,7 @@ import time
 
 import click
 
+from svbrdf_cli.inference import DEFAULT_MODEL
 from svbrdf_cli.presets import PRESETS
 
 log = logging.getLogger("svbrdf")
@@ -68,8 +69,9 @@ def capture_options(f):
     opts = [
         click.option("-o", "--output", required=True, type=click.Path(file_okay=False),
                      help="Folder for the texture sets: one sub-folder per photo, named after it."),
-        click.option("--model", default="fast", show_default=True,
-                     help="Model tier (fast, balanced, best) or a folder of exported models."),
+        click.option("--model", default=DEFAULT_MODEL, show_default=True,
+                     help="Model tier (lite, fast, balanced, best), 'auto' (per photo, the cheapest tier "
+                          "good enough for it) or a folder of exported models."),
         click.option("--preset", type=click.Choice(list(PRESETS)), default="svbrdf", show_default=True,
                      help="Texture-set layout (see 'svbrdf export --help')."),
         click.option("--crop", type=click.Choice(["auto", "markers", "none"]), default="auto", show_default=True,
@@ -183,7 +185,7 @@ def run_inputs(files, output, opts, model, threads, skip_done, quiet):
     from tqdm import tqdm
 
     from svbrdf_cli import capture as C
-    from svbrdf_cli.inference import Chain, model_folder
+    from svbrdf_cli.inference import load_model
 
     def err(msg):
         tqdm.write(f"error: {msg}", file=sys.stderr)  # above the progress bar, never inside it
@@ -192,7 +194,7 @@ def run_inputs(files, output, opts, model, threads, skip_done, quiet):
     if not todo:
         return 0, skipped, failed
 
-    chain = Chain(model_folder(model), threads=threads)
+    chain = load_model(model, threads=threads)
     _clean_partials(output)
     done = 0
     bar = tqdm(total=len(todo), unit="photo", disable=quiet or len(todo) < 2, file=sys.stderr, dynamic_ncols=True)

@@ -48,13 +48,25 @@ def test_provenance_matches_the_files(tier):
     folder = os.path.join(MODELS_DIR, tier)
     with open(os.path.join(folder, "provenance.json")) as f:
         prov = json.load(f)
-    for stage in STAGES:
+    chain = Chain(folder)
+    assert chain.stages in (STAGES, ("maps",))  # the chain, or one end-to-end network (lite)
+    for stage in chain.stages:
         name = f"{stage}.onnx"
         with open(os.path.join(folder, name), "rb") as f:
             assert hashlib.sha256(f.read()).hexdigest() == prov["export"]["files"][name]["sha256"], name
-    assert set(prov["training"]["stages"]) == set(STAGES)
+    assert set(prov["training"]["stages"]) == set(chain.stages)
     for stage, rec in prov["training"]["stages"].items():
         assert rec["steps"] > 0 and rec["seconds"] > 0 and rec["validation"], stage
     assert {"normal", "diffuse", "roughness", "specular"} <= set(prov["des19"]["full_chain"])
-    chain = Chain(folder)
     assert chain.tier == tier and chain.files["maps.onnx"] == prov["export"]["files"]["maps.onnx"]["sha256"][:16]
+
+
+def test_the_auto_rule_is_shipped_calibrated_for_the_installed_tiers():
+    from svbrdf_cli.auto import SIGNALS, load_rule
+
+    rule = load_rule()  # raises when a tier it steps between is missing
+    assert len(rule["ladder"]) >= 2 and rule["ladder"] == [t for t in installed_tiers() if t in rule["ladder"]]
+    assert all(s["signal"] in SIGNALS for s in rule["steps"])
+    cal = rule["calibration"]
+    assert "seed" in cal["data"] and cal["margin"] > 0 and set(cal["tier_error"]) == set(rule["ladder"])
+    assert sum(cal["tiers_taken"].values()) > 0 and all(0 < e < 1 for e in cal["tier_error"].values())

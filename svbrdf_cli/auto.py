@@ -1,0 +1,146 @@
+"""``--model auto``: per photo, the cheapest installed tier that is good enough for the scene.
+
+The rule lives in ``models/auto.json`` (written by ``python -m export.auto``,
+with the numbers it was chosen on). It is a *ladder* of tiers, cheapest first,
+and for each step up a *signal*, a *threshold* and a side (``above``: true or
+false): the photo goes through the cheapest tier; the signal is computed on
+the photo and that tier's maps; if it is on the stepping side of the
+threshold, the photo goes through the next tier and its maps are kept, and so
+on. A threshold of ``null`` means "never step up": the
+calibration found no signal value above which the next tier pays for itself.
+
+Signals (:data:`SIGNALS`) cost little: statistics of the photo, of the cheap
+tier's maps, or the disagreement of the cheap tier with itself on the photo
+turned by 90° (one more pass of the cheap tier). Thresholds are calibrated on
+photos of our own data engine with a held-out seed, never on a validation
+set: ``docs/benchmarks.md`` has the evidence on Des19 and the real photos.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+
+import numpy as np
+
+from svbrdf_cli import conventions as cv
+from svbrdf_cli.inference import MODELS_DIR, Chain, ModelError, installed_tiers
+
+#: Where the calibrated rule is shipped.
+RULE_FILE = os.path.join(MODELS_DIR, "auto.json")
+
+
+def _contrast(image, maps, chain):
+    return float(np.asarray(image).std())
+
+
+def _saturated(image, maps, chain):
+    return float((np.asarray(image) > 0.98).all(-1).mean())
+
+
+def _specular(image, maps, chain):
+    return float(maps["specular"].mean())
+
+
+def _disagreement(image, maps, chain):
+    from svbrdf_cli import tta
+
+    turned = tta.passes(chain, image, [(1, False)])[0]
+    return float(np.mean([np.sqrt(((turned[k] - maps[k]) ** 2).mean()) for k in cv.MAP_NAMES]))
+
+
+#: name -> (function(network input, cheap tier's stored maps, cheap tier's chain), extra passes of the cheap tier, what it is).
+SIGNALS = {
+    "contrast": (_contrast, 0, "standard deviation of the network input"),
+    "saturated": (_saturated, 0, "fraction of saturated pixels in the network input"),
+    "specular": (_specular, 0, "mean specular albedo (stored) the cheap tier predicts"),
+    "disagreement": (_disagreement, 1, "RMS change of the cheap tier's maps when the photo is turned by 90°"),
+}
+
+
+def signal(name, image, maps, chain):
+    """The value of signal ``name`` for one network input."""
+    return SIGNALS[name][0](image, maps, chain)
+
+
+def load_rule(path=RULE_FILE):
+    """The calibrated rule (a dict; see the module docstring), checked against the installed tiers."""
+    if not os.path.isfile(path):
+        raise ModelError(f"--model auto needs its rule '{path}', which is missing; reinstall svbrdf or pick a "
+                         f"tier ({', '.join(installed_tiers()) or 'none installed'}).")
+    with open(path) as f:
+        rule = json.load(f)
+    missing = [t for t in rule["ladder"] if t not in installed_tiers()]
+    if missing:
+        raise ModelError(f"--model auto steps between {', '.join(rule['ladder'])}, but {', '.join(missing)} "
+                         f"is not installed; pick --model {installed_tiers()[0] if installed_tiers() else 'FOLDER'}.")
+    if len(rule["steps"]) != len(rule["ladder"]) - 1 or any(s["signal"] not in SIGNALS for s in rule["steps"]):
+        raise ModelError(f"'{path}' is not a rule this version understands; re-run python -m export.auto.")
+    return rule
+
+
+def decide(rule, values):
+    """Index into ``rule['ladder']`` of the tier to use, given each step's signal value (a list,
+    which may stop early: a value is needed only while the ladder is climbed)."""
+    level = 0
+    for step, value in zip(rule["steps"], values):
+        if step["threshold"] is None or not (value > step["threshold"] if step.get("above", True)
+                                             else value < step["threshold"]):
+            break
+        level += 1
+    return level
+
+
+class AutoModel:
+    """Called like :class:`svbrdf_cli.inference.Chain`; after each call ``used`` is the chain whose maps
+    it returned and ``decision`` says why."""
+
+    tier = "auto"
+
+    def __init__(self, rule=None, threads=0, chains=None):
+        self.rule = rule if rule is not None else load_rule()
+        self.threads = threads
+        self.folder = MODELS_DIR
+        self._chains = dict(chains or {})  # tier -> Chain; the installed tiers are loaded when first needed
+        self.timings, self.decision, self._used = {}, None, None
+
+    def chain(self, tier):
+        if tier not in self._chains:
+            self._chains[tier] = Chain(os.path.join(MODELS_DIR, tier), threads=self.threads)
+        return self._chains[tier]
+
+    @property
+    def used(self):
+        return self._used
+
+    def __call__(self, image):
+        ladder, steps = self.rule["ladder"], self.rule["steps"]
+        timings, trace = {}, []
+        level, chain = 0, self.chain(ladder[0])
+        out = chain(image)
+        timings.update({f"{ladder[0]}_{k}": v for k, v in chain.timings.items()})
+        while level < len(steps):
+            step = steps[level]
+            if step["threshold"] is None:  # never steps up: no signal to compute
+                trace.append({"from": ladder[level], "signal": None, "stepped_up": False})
+                break
+            t0 = time.perf_counter()
+            value = signal(step["signal"], image, {k: out[k] for k in cv.MAP_NAMES}, chain)
+            timings[f"signal_{step['signal']}"] = time.perf_counter() - t0
+            up = decide({"steps": [step]}, [value]) == 1
+            trace.append({"from": ladder[level], "signal": step["signal"], "value": round(value, 5),
+                          "threshold": step["threshold"], "above": step.get("above", True), "stepped_up": up})
+            if not up:
+                break
+            level += 1
+            chain = self.chain(ladder[level])
+            out = chain(image)
+            timings.update({f"{ladder[level]}_{k}": v for k, v in chain.timings.items()})
+        self.timings, self._used = timings, chain
+        self.decision = {"ladder": list(ladder), "chosen": ladder[level], "steps": trace}
+        return out
+
+    def describe(self):
+        """What ``material.json`` records: the chosen tier's files and the decision."""
+        return {**self._used.describe(), "auto": self.decision}

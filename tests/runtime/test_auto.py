@@ -1,0 +1,102 @@
+"""``--model auto``: the rule's logic, that its maps are exactly one tier's, and the CLI's record."""
+
+import json
+import os
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from svbrdf_cli import auto as A
+from svbrdf_cli import conventions as cv
+from svbrdf_cli.inference import ModelError, installed_tiers
+
+LADDER = [t for t in ("lite", "fast") if t in installed_tiers()]
+needs_two = pytest.mark.skipif(len(LADDER) < 2, reason="auto needs the lite and fast tiers installed")
+
+
+def _rule(*steps):
+    return {"ladder": ["a", "b", "c"][:len(steps) + 1], "steps": list(steps)}
+
+
+@pytest.mark.parametrize("steps,values,level", [
+    ([{"signal": "contrast", "threshold": None}], [5.0], 0),                       # never step up
+    ([{"signal": "contrast", "threshold": 0.2}], [0.3], 1),                         # above (the default side)
+    ([{"signal": "contrast", "threshold": 0.2}], [0.2], 0),                         # at the threshold: stay
+    ([{"signal": "contrast", "threshold": 0.2, "above": False}], [0.1], 1),         # below
+    ([{"signal": "contrast", "threshold": 0.2, "above": False}], [0.3], 0),
+    ([{"signal": "contrast", "threshold": 0.2}, {"signal": "saturated", "threshold": 0.5}], [0.3, 0.6], 2),
+    ([{"signal": "contrast", "threshold": 0.2}, {"signal": "saturated", "threshold": 0.5}], [0.3, 0.4], 1),
+    ([{"signal": "contrast", "threshold": 0.2}, {"signal": "saturated", "threshold": 0.5}], [0.1], 0),
+])
+def test_decide_climbs_while_each_signal_is_on_its_stepping_side(steps, values, level):
+    assert A.decide(_rule(*steps), values) == level
+
+
+def _photo(seed=0, size=64):
+    rng = np.random.default_rng(seed)
+    return np.clip(rng.uniform(0.2, 0.5, (size, size, 3)) + 0.05 * rng.standard_normal((size, size, 3)),
+                   0, 1).astype(np.float32)
+
+
+@needs_two
+@pytest.mark.parametrize("threshold,chosen", [(None, 0), (-1.0, 1)])
+def test_auto_returns_exactly_the_chosen_tiers_maps(threshold, chosen):
+    rule = {"ladder": LADDER, "steps": [{"signal": "contrast", "threshold": threshold, "above": True}]}
+    auto = A.AutoModel(rule, threads=1)
+    img = _photo()
+    out = auto(img)
+    tier = LADDER[chosen]
+    ref = auto.chain(tier)(img)
+    assert auto.used is auto.chain(tier) and auto.decision["chosen"] == tier
+    for k in cv.MAP_NAMES:
+        np.testing.assert_array_equal(out[k], ref[k])
+    rec = auto.describe()
+    assert rec["tier"] == tier and rec["auto"]["steps"][0]["stepped_up"] == bool(chosen)
+    assert any(k.startswith(f"{tier}_") for k in auto.timings)
+    if threshold is None:  # a step that never climbs computes no signal
+        assert rec["auto"]["steps"][0]["signal"] is None and not any(k.startswith("signal") for k in auto.timings)
+    else:
+        assert rec["auto"]["steps"][0]["value"] == pytest.approx(float(img.std()), abs=1e-5)
+        assert "signal_contrast" in auto.timings
+
+
+@needs_two
+@pytest.mark.parametrize("name", list(A.SIGNALS))
+def test_signals_are_finite_numbers(name):
+    chain = A.AutoModel({"ladder": LADDER, "steps": [{"signal": name, "threshold": None}]}, threads=1).chain(LADDER[0])
+    img = _photo(1)
+    maps = chain(img)
+    v = A.signal(name, img, {k: maps[k] for k in cv.MAP_NAMES}, chain)
+    assert isinstance(v, float) and np.isfinite(v) and v >= 0
+
+
+def test_a_missing_or_unusable_rule_is_a_clear_error(tmp_path):
+    with pytest.raises(ModelError, match="auto.json.*missing"):
+        A.load_rule(str(tmp_path / "auto.json"))
+    p = tmp_path / "rule.json"
+    p.write_text(json.dumps({"ladder": ["best"], "steps": []}))
+    if "best" not in installed_tiers():
+        with pytest.raises(ModelError, match="best is not installed"):
+            A.load_rule(str(p))
+    p.write_text(json.dumps({"ladder": installed_tiers()[:1] * 2, "steps": [{"signal": "moon", "threshold": 1}]}))
+    with pytest.raises(ModelError, match="re-run python -m export.auto"):
+        A.load_rule(str(p))
+
+
+@needs_two
+def test_capture_with_model_auto_records_the_tier_and_why(tmp_path):
+    from svbrdf_cli.cli.main import cli
+    from svbrdf_cli.imageio import write_image
+
+    photo = tmp_path / "stone.png"
+    write_image(photo, _photo(2, 300))
+    r = CliRunner().invoke(cli, ["capture", str(photo), "-o", str(tmp_path / "out"), "--model", "auto",
+                                 "--confidence"], catch_exceptions=False)
+    assert r.exit_code == 0, r.output
+    rec = json.loads((tmp_path / "out" / "stone" / "material.json").read_text())
+    m = rec["model"]
+    assert m["name"] == "auto" and m["tier"] == m["auto"]["chosen"] and m["tier"] in A.load_rule()["ladder"]
+    assert m["sha256_16"]["maps.onnx"] and os.path.isdir(m["folder"])
+    assert any(k.startswith("network_") for k in rec["timings_s"])
+    assert os.path.isfile(tmp_path / "out" / "stone" / "confidence" / "normal.png")
