@@ -45,6 +45,8 @@ from svbrdf_cli.mapset import stored_to_linear
 CALIBRATION_SEED = 2468
 #: Default tolerance: auto's mean error may exceed the best tier's by this fraction.
 MARGIN = 0.02
+#: Default number of calibration photos.
+CALIBRATION_SAMPLES = 128
 
 
 def _chw(maps):
@@ -290,7 +292,7 @@ def calibration_table(rule):
 
 
 @click.command()
-@click.option("--samples", default=128, show_default=True, help="Generated calibration photos.")
+@click.option("--samples", default=CALIBRATION_SAMPLES, show_default=True, help="Generated calibration photos.")
 @click.option("--margin", default=MARGIN, show_default=True, help="Tolerated relative error over the best tier.")
 @click.option("--repeat", default=5, show_default=True, help="Timed runs per tier (median).")
 @click.option("--out", type=click.Path(dir_okay=False), default=A.RULE_FILE, show_default=True)

@@ -60,5 +60,7 @@ def test_benchmark_runs_on_two_samples(shared_data, tmp_path):
     assert ev["des19"]["photos"] == 2 and sum(ev["des19"]["taken"].values()) == 2
     assert ev["real photos (no ground truth)"]["photos"] == 2
     assert all(v > 0 for v in ev["des19"]["seconds"].values())
+    again = res["auto"]["recalibrated"]["rule"]
+    assert again["ladder"] == res["auto"]["rule"]["ladder"] and "8 photos" in again["calibration"]["data"]
     for f in ("speed_vs_accuracy.md", "stability.md", "confidence.md", "auto.md", "benchmark.json"):
         assert (tmp_path / "tab" / f).is_file()
