@@ -107,7 +107,7 @@ def choose_step(err_lo, err_hi, cost_lo, cost_hi, values, signal_cost, margin=MA
     A candidate steps up the photos whose signal is on one side of its threshold; its
     error is the mean of the errors of the tiers taken, its cost the mean
     seconds (the cheap tier always, the signal, the next tier where taken).
-    Returns (chosen candidate, all candidates), candidates as dicts with
+    Returns (chosen candidate, the candidates within the tolerance), as dicts with
     ``signal``, ``threshold`` (None: never step up), ``above`` (step up above
     the threshold, or below), ``error``, ``seconds``, ``stepped_up`` (fraction).
     """
@@ -130,7 +130,12 @@ def choose_step(err_lo, err_hi, cost_lo, cost_hi, values, signal_cost, margin=MA
                               "seconds": float(cost_lo + signal_cost[name] + up.mean() * cost_hi),
                               "stepped_up": float(up.mean())})
     ok = [c for c in cands if c["error"] <= best * (1 + margin) + 1e-12]
-    return min(ok, key=lambda c: (round(c["seconds"], 6), c["error"])), cands
+    return min(ok, key=_cheapest), ok
+
+
+def _cheapest(candidate):
+    """Order of preference among rules within the tolerance: cost, then error."""
+    return round(candidate["seconds"], 6), candidate["error"]
 
 
 def calibrate(samples, chains=None, margin=MARGIN, repeat=5, log=print):
@@ -143,12 +148,9 @@ def calibrate(samples, chains=None, margin=MARGIN, repeat=5, log=print):
     errors, values = collect(chains, samples, log)
     steps, report = [], []
     for lo, hi in zip(ladder, ladder[1:]):
-        chosen, cands = choose_step(errors[lo], errors[hi], cost[lo], cost[hi], values[lo], sig_cost, margin)
-        per_signal = {}
-        for c in cands:
-            if c["threshold"] is not None and c["error"] <= min(errors[lo].mean(), errors[hi].mean()) * (1 + margin):
-                if c["signal"] not in per_signal or c["seconds"] < per_signal[c["signal"]]["seconds"]:
-                    per_signal[c["signal"]] = c
+        chosen, within = choose_step(errors[lo], errors[hi], cost[lo], cost[hi], values[lo], sig_cost, margin)
+        per_signal = {n: min(cs, key=_cheapest) for n in A.SIGNALS
+                      if (cs := [c for c in within if c["signal"] == n and c["threshold"] is not None])}
         steps.append({k: chosen[k] for k in ("signal", "threshold", "above")})
         report.append({"from": lo, "to": hi, "chosen": chosen, "cheapest_per_signal": per_signal,
                        "correlation": {n: float(np.corrcoef(values[lo][n], errors[hi] - errors[lo])[0, 1])

@@ -128,7 +128,7 @@ class NineLights:
 
 def timings(method, repeat=5, big=2048, seed=0):
     """Seconds per image: the method at 256², and a ``big``² crop through the capture path to ``big``² maps."""
-    from svbrdf_cli.capture import NETWORK_SIZE, auto_exposure_gain, resize, upsample_maps
+    from svbrdf_cli.capture import NETWORK_SIZE, auto_exposure_gain, network_input, resize, upsample_maps
     from svbrdf_cli.ingest import encode_for_network
 
     rng = np.random.default_rng(seed)
@@ -137,10 +137,10 @@ def timings(method, repeat=5, big=2048, seed=0):
                    + rng.normal(0, 0.01, (big, big, 3)).astype(np.float32), 0, 1)
 
     def whole():
-        low = resize(crop, NETWORK_SIZE)
-        gain = np.float32(2.0 ** auto_exposure_gain(low))
-        net_in = encode_for_network(low * gain)
-        return upsample_maps(method(net_in), net_in, encode_for_network(crop * gain), "guided")
+        low = resize(crop, NETWORK_SIZE)  # as svbrdf capture: exposure measured at network size, then applied
+        gain_ev = auto_exposure_gain(low)
+        net_in = network_input(low, gain_ev)
+        return upsample_maps(method(net_in), net_in, encode_for_network(crop * np.float32(2.0 ** gain_ev)), "guided")
 
     return {"s_256": median_seconds(lambda: method(small), repeat), f"s_{big}": median_seconds(whole, repeat)}
 
@@ -285,18 +285,20 @@ def run(limit=None, repeat=5, figures="docs/figures", tables="docs/tables", stab
     results = {"methods": rows, "samples": len(samples), "repeat": repeat, "cores": os.cpu_count()}
 
     from svbrdf_cli.capture import network_input
-    from svbrdf_cli.inference import DEFAULT_MODEL, Chain, model_folder
+    from svbrdf_cli.inference import DEFAULT_MODEL
 
+    by_name = {m.name: m for m in methods}  # the sessions loaded above serve every part below
     tier = DEFAULT_MODEL  # what svbrdf capture runs unless told otherwise
-    chain = Chain(model_folder(tier), threads=threads)
+    chain = by_name[tier].chain
     results["confidence"] = {"tier": tier, "maps": confidence_evidence(chain, samples)}
-    rule = M.auto_rule()
-    if rule is not None:
-        real = [network_input(lin) for _, lin in S.real_crops(root / "real", limit or S.REAL_PHOTOS)] \
-            if os.path.isdir(root / "real") else []
-        results["auto"] = {"rule": rule, "sets": auto_evidence(rule, samples, nine, real, log=log)}
+    real = S.real_crops(root / "real", limit or S.REAL_PHOTOS) if os.path.isdir(root / "real") else []
+    if "auto" in by_name:
+        rule = by_name["auto"].model.rule
+        tiers = {t: by_name[t].chain for t in rule["ladder"]}
+        results["auto"] = {"rule": rule, "sets": auto_evidence(rule, samples, nine, [network_input(lin) for _, lin in real],
+                                                               chains=tiers, log=log)}
         # The shipped rule's calibration, run again (python -m export.auto, without writing the rule).
-        fresh = calibrate(generated(8 if limit else CALIBRATION_SAMPLES), repeat=repeat, log=log)
+        fresh = calibrate(generated(8 if limit else CALIBRATION_SAMPLES), chains=tiers, repeat=repeat, log=log)
         results["auto"]["recalibrated"] = {"rule": fresh, "same_steps_as_shipped": fresh["steps"] == rule["steps"]}
     os.makedirs(figures, exist_ok=True)
     os.makedirs(tables, exist_ok=True)
@@ -309,7 +311,7 @@ def run(limit=None, repeat=5, figures="docs/figures", tables="docs/tables", stab
                            + ("gives the shipped rule's steps.\n" if again["same_steps_as_shipped"]
                               else "does NOT give the shipped rule's steps: re-run python -m export.auto.\n"))
     if stability:
-        results["stability"] = S.run(chain, samples, des19, root / "real", limit=limit,
+        results["stability"] = S.run(chain, samples, des19, real,
                                      gallery=os.path.join(figures, "stability_gallery.png"), log=log)
         text["stability.md"] = S.table(results["stability"])
     for name, t in text.items():

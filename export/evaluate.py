@@ -119,14 +119,11 @@ def oracle_scale(pred_linear, gt_linear):
     return dict(pred_linear, diffuse=pred_linear["diffuse"] * k, specular=pred_linear["specular"] * k), k
 
 
-def fit_intensity(rendered, photo, channel_axis=-1):
+def fit_intensity(rendered, photo):
     """The light intensity that makes ``rendered`` (linear, at unit intensity) best reproduce ``photo``
-    (encoded): least squares in linear space over the photo's unsaturated pixels (numpy or torch)."""
-    ok = (photo < 0.98).all(channel_axis, keepdims=True) if isinstance(photo, np.ndarray) \
-        else (photo < 0.98).all(channel_axis, keepdim=True)
-    ok = ok.repeat(rendered.shape[channel_axis], channel_axis) if isinstance(ok, np.ndarray) else ok.expand_as(rendered)
-    lin = cv.image_to_linear(photo)
-    r, t = rendered[ok], lin[ok]
+    (encoded), both (H, W, C) arrays: least squares in linear space over the photo's unsaturated pixels."""
+    ok = np.broadcast_to((photo < 0.98).all(-1, keepdims=True), rendered.shape)
+    r, t = rendered[ok], cv.image_to_linear(photo)[ok]
     return float((r * t).sum()) / max(float((r * r).sum()), 1e-12)
 
 
@@ -143,7 +140,7 @@ def known_flash_scale(pred_linear, photo, intensity=cv.LIGHT_INTENSITY):
     reproduce its inputs under our renderer, against the conventions' 2.91.
     """
     img = render_maps({k: v[None] for k, v in pred_linear.items()}, intensity=1.0)[0]  # linear, unit flash
-    k = fit_intensity(img, photo, channel_axis=0) / intensity
+    k = fit_intensity(img.permute(1, 2, 0).numpy(), photo.permute(1, 2, 0).numpy()) / intensity
     return dict(pred_linear, diffuse=(pred_linear["diffuse"] * k).clamp(0, 1),
                 specular=(pred_linear["specular"] * k).clamp(0, 1)), k
 

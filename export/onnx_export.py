@@ -63,15 +63,14 @@ def stage_io(net, stage):
     return ins, outs
 
 
-def export_stage(net, stage, path, size=256, metadata=None, half=False, weights="float32"):
+def export_stage(net, stage, path, size=256, metadata=None, weights="float32"):
     """Write one stage as ONNX; returns the path.
 
     ``weights``: "float32", "float16" (:func:`store_float16`) or "int8"
-    (:func:`store_int8`); ``half=True`` is "float16".
+    (:func:`store_int8`).
     """
     import onnx
 
-    weights = "float16" if half else weights
     ins, outs = stage_io(net, stage)
     module = _Stage(net.eval(), stage).eval()
     dummy = tuple(torch.rand(1, 3, size, size) for _ in ins)
@@ -163,7 +162,7 @@ def store_int8(model, min_elements=1024):
     return _store_weights(model, lambda w: w.size >= min_elements and w.ndim >= 2, encode)
 
 
-def export_run(run, out, size=256, half=True, weights=None):
+def export_run(run, out, size=256, weights="float16"):
     """Export every stage of a trained run (see :func:`export.train.load_trained`).
 
     Beside the models, ``provenance.json`` holds the run's provenance (data,
@@ -177,7 +176,6 @@ def export_run(run, out, size=256, half=True, weights=None):
     from export.files import read_json, write_json
     from export.train import load_trained
 
-    weights = weights or ("float16" if half else "float32")
     net = load_trained(run)
     prov = read_json(os.path.join(run, "provenance.json"))
     os.makedirs(out, exist_ok=True)

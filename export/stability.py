@@ -129,6 +129,7 @@ def real_photos(real_root, count=REAL_PHOTOS):
 
 
 def real_crops(real_root, count):
+    """[(name, linear crop at network size)] of :func:`real_photos`, cropped as ``svbrdf capture`` does."""
     from svbrdf_cli import ingest, rectify
     from svbrdf_cli.capture import NETWORK_SIZE, resize
 
@@ -139,12 +140,12 @@ def real_crops(real_root, count):
     return out
 
 
-def run(chain, des19_samples, des19_dir, real_root, limit=None, gallery=None, log=print, seed=0):
+def run(chain, des19_samples, des19_dir, real, gallery=None, log=print, seed=0):
     """Run every perturbation on ``des19_samples`` (from ``export.evaluate.load_des19(des19_dir)``) and
-    real photos; returns {"rows": {name: stats}, "clean": Des19 scores, "failures": [...], "photos": counts}."""
+    ``real`` photos (:func:`real_crops`); returns {"rows": {name: stats}, "clean": Des19 scores,
+    "failures": [...], "photos": counts}."""
     rng = np.random.default_rng(seed)
     des19 = [(n, cv.image_to_linear(p.permute(1, 2, 0).numpy()).astype(np.float32), gt) for n, p, gt in des19_samples]
-    real = real_crops(real_root, limit or REAL_PHOTOS) if os.path.isdir(real_root) else []
     work = tempfile.mkdtemp(prefix="svbrdf-stability-")
     failures, examples = [], []
 

@@ -46,8 +46,8 @@ def _specular(image, maps, chain):
 def _disagreement(image, maps, chain):
     from svbrdf_cli import tta
 
-    turned = tta.passes(chain, image, [(1, False)])[0]
-    return float(np.mean([np.sqrt(((turned[k] - maps[k]) ** 2).mean()) for k in cv.MAP_NAMES]))
+    spread = tta.disagreement([maps] + tta.passes(chain, image, [(1, False)]))
+    return float(np.mean([d.mean() for d in spread.values()]))
 
 
 #: name -> (function(network input, cheap tier's stored maps, cheap tier's chain), extra passes of the cheap tier, what it is).
@@ -55,7 +55,8 @@ SIGNALS = {
     "contrast": (_contrast, 0, "standard deviation of the network input"),
     "saturated": (_saturated, 0, "fraction of saturated pixels in the network input"),
     "specular": (_specular, 0, "mean specular albedo (stored) the cheap tier predicts"),
-    "disagreement": (_disagreement, 1, "RMS change of the cheap tier's maps when the photo is turned by 90°"),
+    "disagreement": (_disagreement, 1, "mean per-pixel spread (svbrdf_cli.tta.disagreement) of the cheap "
+                                        "tier's maps of the photo and of the photo turned by 90°"),
 }
 
 
@@ -80,13 +81,19 @@ def load_rule(path=RULE_FILE):
     return rule
 
 
+def steps_up(step, value):
+    """Whether a photo with signal ``value`` takes the next tier at this ``step`` of a rule."""
+    if step["threshold"] is None:
+        return False
+    return value > step["threshold"] if step.get("above", True) else value < step["threshold"]
+
+
 def decide(rule, values):
     """Index into ``rule['ladder']`` of the tier to use, given each step's signal value (a list,
     which may stop early: a value is needed only while the ladder is climbed)."""
     level = 0
     for step, value in zip(rule["steps"], values):
-        if step["threshold"] is None or not (value > step["threshold"] if step.get("above", True)
-                                             else value < step["threshold"]):
+        if not steps_up(step, value):
             break
         level += 1
     return level
@@ -128,7 +135,7 @@ class AutoModel:
             t0 = time.perf_counter()
             value = signal(step["signal"], image, {k: out[k] for k in cv.MAP_NAMES}, chain)
             timings[f"signal_{step['signal']}"] = time.perf_counter() - t0
-            up = decide({"steps": [step]}, [value]) == 1
+            up = steps_up(step, value)
             trace.append({"from": ladder[level], "signal": step["signal"], "value": round(value, 5),
                           "threshold": step["threshold"], "above": step.get("above", True), "stepped_up": up})
             if not up:

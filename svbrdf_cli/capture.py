@@ -251,6 +251,7 @@ class Prepared:
     path: str
     photo: ingest.Photo
     crop: rectify.Crop
+    small: np.ndarray   # the crop at NETWORK_SIZE², linear (what the exposure was measured on)
     gain_ev: float
     timings: dict
 
@@ -270,7 +271,7 @@ def prepare(path, opts):
     small = resize(c.image, NETWORK_SIZE)
     gain = opts.exposure if opts.exposure is not None else auto_exposure_gain(small)
     t2 = time.perf_counter()
-    return Prepared(os.fspath(path), photo, c, float(gain), {"read": t1 - t0, "crop": t2 - t1})
+    return Prepared(os.fspath(path), photo, c, small, float(gain), {"read": t1 - t0, "crop": t2 - t1})
 
 
 def capture(prepared, chain, out_root, opts, model_name="fast"):
@@ -284,7 +285,7 @@ def capture(prepared, chain, out_root, opts, model_name="fast"):
     timings = dict(p.timings)
     gain = np.float32(2.0 ** p.gain_ev)
     t0 = time.perf_counter()
-    net_in = network_input(p.crop.image, p.gain_ev)
+    net_in = network_input(p.small, p.gain_ev)  # already at network size: no second resize
     out = chain(net_in)
     timings.update({f"network_{k}": v for k, v in chain.timings.items()})
     t1 = time.perf_counter()

@@ -46,12 +46,16 @@ def _session(path, threads):
     return ort.InferenceSession(path, sess_options=opts, providers=providers)
 
 
+def model_stages(folder):
+    """The stages exported in ``folder``: all of :data:`STAGES` (the chain), ``("maps",)`` (an
+    end-to-end network), or None when the set is incomplete."""
+    present = tuple(s for s in STAGES if os.path.isfile(os.path.join(folder, f"{s}.onnx")))
+    return present if present in (STAGES, ("maps",)) else None
+
+
 def installed_tiers():
-    """Tiers whose models are in :data:`MODELS_DIR` (all three stages, or ``maps.onnx`` alone), cheapest first."""
-    def complete(t):
-        have = [os.path.isfile(os.path.join(MODELS_DIR, t, f"{s}.onnx")) for s in STAGES]
-        return all(have) or have == [False, False, True]
-    return [t for t in TIERS if complete(t)]
+    """Tiers whose models are in :data:`MODELS_DIR`, cheapest first."""
+    return [t for t in TIERS if model_stages(os.path.join(MODELS_DIR, t))]
 
 
 def model_folder(model):
@@ -94,13 +98,11 @@ class Chain:
     def __init__(self, folder, threads=0):
         self.folder = os.fspath(folder)
         self.sessions, self.meta = {}, {}
-        # A chain has all three stages; a baseline export (the end-to-end network) only maps.onnx.
-        present = [s for s in STAGES if os.path.isfile(os.path.join(self.folder, f"{s}.onnx"))]
-        if "maps" not in present or present not in (list(STAGES), ["maps"]):
-            missing = [f"{s}.onnx" for s in STAGES if s not in present]
+        self.stages = model_stages(self.folder)
+        if self.stages is None:
+            missing = [f"{s}.onnx" for s in STAGES if not os.path.isfile(os.path.join(self.folder, f"{s}.onnx"))]
             raise ModelError(f"'{self.folder}' has no {', '.join(missing)}; export a trained run with "
                              "python -m export.onnx_export.")
-        self.stages = tuple(present)
         for stage in self.stages:
             path = os.path.join(self.folder, f"{stage}.onnx")
             sess = _session(path, threads)

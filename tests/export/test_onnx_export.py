@@ -38,7 +38,7 @@ def test_float16_storage_halves_the_file_and_keeps_the_numbers(tmp_path):
     torch.manual_seed(0)
     net = SVBRDFNet(TINY, pretrained=False).eval()
     full = export_stage(net, "maps", str(tmp_path / "f32.onnx"), size=64)
-    half = export_stage(net, "maps", str(tmp_path / "f16.onnx"), size=64, half=True)
+    half = export_stage(net, "maps", str(tmp_path / "f16.onnx"), size=64, weights="float16")
     assert os.path.getsize(half) < 0.6 * os.path.getsize(full)
     feeds = {n: np.random.default_rng(i).random((1, 3, 64, 64), dtype=np.float32) for i, n in enumerate(IO["maps"][0])}
     a = ort.InferenceSession(full, providers=["CPUExecutionProvider"]).run(None, feeds)
@@ -54,7 +54,7 @@ def test_runtime_chain_matches_torch(tmp_path):
     torch.manual_seed(0)
     net = SVBRDFNet(TINY, pretrained=False).eval()
     for stage in IO:
-        export_stage(net, stage, str(tmp_path / f"{stage}.onnx"), size=64, half=False)
+        export_stage(net, stage, str(tmp_path / f"{stage}.onnx"), size=64)
     img = np.random.default_rng(3).random((70, 90, 3), dtype=np.float32)  # not a multiple of 32
     out = Chain(tmp_path)(img)
     pad = np.pad(img, ((0, 26), (0, 6), (0, 0)), mode="reflect")
