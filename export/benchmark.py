@@ -71,7 +71,8 @@ def paper_accuracy(samples, des19):
     """The paper's published Des19 outputs, scored like a method."""
     maps, _ = score(des19, prefix="paper_")
     paper = {k: f"paper_{k}" for k in MAPS}
-    rel = [relight_rmse(_chw(read_map_set(os.path.join(des19, name), paper)), gt) for name, _, gt in samples]
+    rel = [relight_rmse(_chw(read_map_set(os.path.join(des19, name), paper, linear_albedo=True)), gt)
+           for name, _, gt in samples]
     return {**maps, "relight": float(np.mean(rel))}
 
 

@@ -48,7 +48,11 @@ RELIGHT = [(0.0, 0.0, cv.CAMERA_HEIGHT)] + [
 
 
 def load_des19(folder):
-    """[(name, input (3, H, W) tensor, linear GT maps dict of (C, H, W))]."""
+    """[(name, input (3, H, W) tensor, linear GT maps dict of (C, H, W))].
+
+    The ground truth's diffuse and specular PNGs hold linear albedo (``../shared/data/README.md``),
+    so they are read as they are, not decoded from our gamma-2.2 encoding.
+    """
     out = []
     for name in sorted(os.listdir(folder)):
         d = os.path.join(folder, name)
@@ -56,7 +60,7 @@ def load_des19(folder):
             continue
         img = torch.from_numpy(read_image(os.path.join(d, "input.png"))[..., :3]).permute(2, 0, 1).float()
         maps = {k: torch.from_numpy(np.ascontiguousarray(v)).permute(2, 0, 1).float()
-                for k, v in read_map_set(d).items()}
+                for k, v in read_map_set(d, linear_albedo=True).items()}
         maps["roughness"] = maps["roughness"][:1]
         out.append((name, img, maps))
     return out
@@ -107,11 +111,8 @@ def oracle_scale(pred_linear, gt_linear):
     """Pred maps with diffuse and specular times the one scalar that best fits the ground truth.
 
     A diagnostic, not a method: from one auto-exposed photo the albedo scale
-    is ambiguous (a darker material under a stronger light looks the same),
-    and Des19's ground truth sits ~5x lower in the stored encoding than
-    physically scaled albedo (its dielectric specular is stored as ~0.043,
-    linear F0 ~0.001, against 0.04). Least squares over both maps, in linear
-    space, per sample.
+    is ambiguous (a darker material under a stronger light looks the same).
+    Least squares over both maps, in linear space, per sample.
     """
     p = torch.cat([pred_linear["diffuse"].flatten(), pred_linear["specular"].flatten()])
     g = torch.cat([gt_linear["diffuse"].flatten(), gt_linear["specular"].flatten()])
@@ -127,7 +128,7 @@ def fit_intensity(rendered, photo):
     return float((r * t).sum()) / max(float((r * r).sum()), 1e-12)
 
 
-def known_flash_scale(pred_linear, photo, intensity=cv.LIGHT_INTENSITY):
+def known_flash_scale(pred_linear, photo, intensity=cv.FLASH_INTENSITY):
     """Pred maps with diffuse and specular rescaled so that, rendered under a
     flash of the known ``intensity``, they reproduce the photo's brightness.
 

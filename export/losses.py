@@ -102,16 +102,18 @@ def random_light_views(batch, count=RENDER_LIGHTS, generator=None, device="cpu",
     return draw(), draw()
 
 
-def rendering_loss(pred_linear, target_linear, lights, cameras):
-    """Eq. 18: mean L1 of log renderings over the lights; maps are linear dicts."""
-    total = 0
-    for light, cam in zip(lights, cameras):
-        a = render(pred_linear["normal"], pred_linear["diffuse"], pred_linear["roughness"], pred_linear["specular"],
-                   light=light, camera=cam, intensity=cv.LIGHT_INTENSITY)
-        b = render(target_linear["normal"], target_linear["diffuse"], target_linear["roughness"],
-                   target_linear["specular"], light=light, camera=cam, intensity=cv.LIGHT_INTENSITY)
-        total = total + F.l1_loss(torch.log(a + 0.01), torch.log(b + 0.01))
-    return total / len(lights)
+def _log_renders(maps, lights, cameras):
+    return [torch.log(render(maps["normal"], maps["diffuse"], maps["roughness"], maps["specular"],
+                             light=light, camera=cam, intensity=cv.LIGHT_INTENSITY) + 0.01)
+            for light, cam in zip(lights, cameras)]
+
+
+def rendering_loss(pred_linear, target_linear, lights, cameras, target_renders=None):
+    """Eq. 18: mean L1 of log renderings over the lights; maps are linear dicts
+    (``target_renders``: the target's log renderings, when already made)."""
+    b = target_renders if target_renders is not None else _log_renders(target_linear, lights, cameras)
+    a = _log_renders(pred_linear, lights, cameras)
+    return sum(F.l1_loss(x, y) for x, y in zip(a, b)) / len(lights)
 
 
 def map_losses(pred_stored, target_stored, lights, cameras, names=cv.MAP_NAMES):
@@ -121,11 +123,13 @@ def map_losses(pred_stored, target_stored, lights, cameras, names=cv.MAP_NAMES):
     pred_linear = cv.decode_maps(pred_stored, axis=1)
     parts = {}
     total = 0
+    with torch.no_grad():  # the target's renderings are the same for every map: once
+        target_renders = _log_renders(target_linear, lights, cameras)
     for name in names:
         rec = F.l1_loss(pred_stored[name], target_stored[name])
         mixed = dict(target_linear)
         mixed[name] = pred_linear[name]
-        ren = rendering_loss(mixed, target_linear, lights, cameras)
+        ren = rendering_loss(mixed, target_linear, lights, cameras, target_renders)
         parts[name] = rec
         parts[name + "_render"] = ren
         total = total + MAP_WEIGHTS["rec"] * rec + MAP_WEIGHTS["render"] * ren

@@ -4,7 +4,7 @@ A method maps an encoded (H, W, 3) network input to a stored map set (HWC,
 :mod:`svbrdf_cli.conventions`' encoding). :func:`available` lists what can be
 run here: every installed tier (onnxruntime, exactly what ``svbrdf capture``
 runs), ``--model auto`` when its rule is installed, the end-to-end baseline
-when its export is present, and the floor. The paper has no runnable model here; its published
+when its export is present, the physical estimate and the floor. The paper has no runnable model here; its published
 Des19 outputs are scored where the benchmarks need them.
 """
 
@@ -24,17 +24,36 @@ TIER_LABELS = {"lite": "lite tier (one small end-to-end UNet)"}
 
 
 class Floor:
-    """Flat normal, the input as diffuse, roughness 0.5, dielectric F0 = 0.04: what a method must beat."""
+    """Flat normal, diffuse = 0.6 x the linear input, roughness 0.5, dielectric F0 = 0.04: four lines
+    every method must beat (the floor of ``../shared/data/README.md``)."""
 
-    name, label = "floor", "floor (flat normal, input as diffuse, r = 0.5, F0 = 0.04)"
+    name, label = "floor", "floor (flat normal, diffuse = 0.6 x linear input, r = 0.5, F0 = 0.04)"
+    #: Diffuse albedo per unit of linear input.
+    DIFFUSE_GAIN = 0.6
 
     def __call__(self, image):
         h, w = image.shape[:2]
-        spec = float(cv.albedo_to_stored(np.float32(0.04)))
+        spec = float(cv.albedo_to_stored(np.float32(cv.DIELECTRIC_F0)))
+        diffuse = cv.albedo_to_stored(self.DIFFUSE_GAIN * cv.image_to_linear(np.asarray(image, np.float32)))
         return {"normal": np.broadcast_to(np.float32(cv.FLAT_NORMAL_ENCODED), (h, w, 3)).copy(),
-                "diffuse": np.asarray(image, np.float32).copy(),
+                "diffuse": diffuse.astype(np.float32),
                 "roughness": np.full((h, w, 1), 0.5, np.float32),
                 "specular": np.full((h, w, 3), spec, np.float32)}
+
+
+class Physical:
+    """``--model physical``: the maps from the flash physics alone (:mod:`svbrdf_cli.physical`)."""
+
+    name, label = "physical", "physical estimate (flash falloff, highlight fit, dielectric F0; no network)"
+
+    def __init__(self):
+        from svbrdf_cli.physical import PhysicalModel
+
+        self.chain = PhysicalModel()
+
+    def __call__(self, image):
+        out = self.chain(image)
+        return {k: out[k] for k in cv.MAP_NAMES}
 
 
 class Network:
@@ -78,10 +97,11 @@ def auto_rule():
 
 
 def available(threads=0):
-    """Runnable methods, cheapest kind first: floor, the end-to-end baseline, every installed tier, auto."""
+    """Runnable methods, cheapest kind first: floor, the physical estimate, the end-to-end baseline,
+    every installed tier, auto."""
     from svbrdf_cli.inference import MODELS_DIR, installed_tiers
 
-    out = [Floor()]
+    out = [Floor(), Physical()]
     e2e = os.path.join(BASELINES_DIR, "e2e-fast")
     if os.path.isfile(os.path.join(e2e, "maps.onnx")):
         out.append(Network("e2e", e2e, "end-to-end UNet (input -> maps, fast-tier parameters)", threads))

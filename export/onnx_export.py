@@ -26,6 +26,7 @@ from torch import nn
 
 from export.nets.chain import VARIANTS
 from svbrdf_cli import conventions as cv
+from svbrdf_cli.physical import PHYSICAL_VERSION
 
 OPSET = 19
 SIZE_MULTIPLE = 32
@@ -44,7 +45,7 @@ class _Stage(nn.Module):
         self.net, self.stage = net, stage
 
     def forward(self, *xs):
-        ins, outs = IO[self.stage]
+        ins, outs = stage_io(self.net, self.stage)
         named = dict(zip(ins, xs))
         if self.stage == "masks":
             out = self.net.run_masks(named["photo"])
@@ -55,11 +56,18 @@ class _Stage(nn.Module):
         return tuple(out[k] for k in outs)
 
 
+#: The physical estimate's input (the runtime computes it: svbrdf_cli.inference.PHYSICAL_INPUT).
+PHYSICAL = "physical"
+
+
 def stage_io(net, stage):
-    """(input names, output names) of ``stage`` of ``net``; the end-to-end baseline's maps take the photo only."""
+    """(input names, output names) of ``stage`` of ``net``; the end-to-end baseline's maps take the photo
+    only; a refining net's maps also take the physical estimate."""
     ins, outs = IO[stage]
     if getattr(net, "variant", "chain") == "e2e":
         ins = ("photo",)
+    if stage == "maps" and getattr(net, "refine", False):
+        ins = ins + (PHYSICAL,)
     return ins, outs
 
 
@@ -73,7 +81,9 @@ def export_stage(net, stage, path, size=256, metadata=None, weights="float32"):
 
     ins, outs = stage_io(net, stage)
     module = _Stage(net.eval(), stage).eval()
-    dummy = tuple(torch.rand(1, 3, size, size) for _ in ins)
+    from export.nets.chain import PHYSICAL_CHANNELS
+
+    dummy = tuple(torch.rand(1, PHYSICAL_CHANNELS if n == PHYSICAL else 3, size, size) for n in ins)
     dyn = {n: {0: "batch", 2: "height", 3: "width"} for n in ins + tuple(outs)}
     tmp = path + ".part"
     with torch.no_grad():
@@ -83,6 +93,7 @@ def export_stage(net, stage, path, size=256, metadata=None, weights="float32"):
     meta = {"conventions": cv.CONVENTIONS_VERSION, "stage": stage, "tier": getattr(net, "tier", "custom"),
             "variant": getattr(net, "variant", "chain"),
             "inputs": ",".join(ins), "outputs": ",".join(outs), "size_multiple": str(SIZE_MULTIPLE),
+            **({"physical_version": PHYSICAL_VERSION} if PHYSICAL in ins else {}),
             "layout": "NCHW float32 in [0, 1]; maps in the stored encoding"}
     meta.update({k: v if isinstance(v, str) else json.dumps(v) for k, v in (metadata or {}).items()})
     for k, v in meta.items():

@@ -33,8 +33,9 @@ import torch
 from export import losses as L
 from export.data import dataset as D
 from export.files import atomic_torch_save, read_json, write_json
-from export.nets.chain import ALL_TIERS, STAGES, VARIANTS, build, tier_variant
+from export.nets.chain import ALL_TIERS, STAGES, VARIANTS, build, physical_input, refined_maps, tier_variant
 from svbrdf_cli import conventions as cv
+from svbrdf_cli.physical import PHYSICAL_VERSION
 
 #: Ground truth each stage needs from the data engine.
 STAGE_TARGETS = {"masks": ("M_b", "M_h"), "aux": ("I_bf", "I_hr", "I_hr2"), "maps": ()}
@@ -58,6 +59,7 @@ class RunConfig:
     perceptual: bool = True
     val_samples: int = 16
     variant: str = "chain"   # or a Table IV ablation: "nomask", "e2e" (export.nets.chain.VARIANTS)
+    refine: bool = True      # the maps stage corrects the physical estimate (svbrdf_cli.physical)
 
 
 def _stored_targets(batch):
@@ -73,7 +75,8 @@ class StageTrainer:
         if stage not in VARIANTS[config.variant]:
             raise click.ClickException(f"the {config.variant} variant has no '{stage}' stage "
                                        f"(it trains {', '.join(VARIANTS[config.variant])})")
-        self.net = net if net is not None else build(config.tier, variant=config.variant).to(self.device)
+        self.net = net if net is not None else build(config.tier, variant=config.variant,
+                                                       refine=config.refine).to(self.device)
         self.bank = bank
         self.data_cfg = D.DataConfig(size=config.size, targets=STAGE_TARGETS[stage])
         self.gen = D.worker_generator(config.seed, STAGES.index(stage) + 1, "cpu")
@@ -123,7 +126,8 @@ class StageTrainer:
                 "elapsed": self.elapsed, "history": self.history, "generator": self.gen.get_state(),
                 "critics": self.critics.state_dict() if self.critics is not None else None,
                 "critic_optimizer": self.critic_opt.state_dict() if self.critic_opt is not None else None,
-                "config": dataclasses.asdict(self.cfg), "conventions": cv.CONVENTIONS_VERSION}
+                "config": dataclasses.asdict(self.cfg), "conventions": cv.CONVENTIONS_VERSION,
+                "physical_version": PHYSICAL_VERSION}
 
     def save(self):
         os.makedirs(self.out, exist_ok=True)
@@ -135,6 +139,12 @@ class StageTrainer:
         ck = torch.load(self.path, map_location=self.device, weights_only=False)
         if ck["config"]["tier"] != self.cfg.tier:
             raise click.ClickException(f"{self.path}: was trained as tier {ck['config']['tier']!r}, not {self.cfg.tier!r}")
+        if self.cfg.refine and ck.get("physical_version") != PHYSICAL_VERSION:
+            raise click.ClickException(f"{self.path}: refines version {ck.get('physical_version')!r} of the physical "
+                                       f"estimate, not the current {PHYSICAL_VERSION!r}; start it again with --fresh")
+        if ck["config"].get("refine", False) != self.cfg.refine:
+            raise click.ClickException(f"{self.path}: was trained with refine={ck['config'].get('refine', False)}, "
+                                       f"not {self.cfg.refine}")
         if ck["config"].get("variant", "chain") != self.cfg.variant:
             raise click.ClickException(f"{self.path}: was trained as variant {ck['config'].get('variant', 'chain')!r}, "
                                        f"not {self.cfg.variant!r}")
@@ -158,6 +168,8 @@ class StageTrainer:
 
     def batch(self, generator=None, n=None):
         b = D.make_batch(generator or self.gen, n or self.cfg.batch, self.data_cfg, self.bank, device="cpu")
+        if self.stage == "maps" and getattr(self.net, "refine", False):
+            b["physical"] = physical_input(b["photo"])
         return {k: v.to(self.device) for k, v in b.items() if torch.is_tensor(v)}
 
     def losses(self, b, train=True):
@@ -179,7 +191,7 @@ class StageTrainer:
             return total, parts, pred
         with torch.no_grad():
             aux = net.run_aux(photo, masks)
-        pred = net.run_maps(photo, aux)
+        pred = net.run_maps(photo, {**aux, "physical": b.get("physical")})
         target = _stored_targets(b)
         lights, cams = L.random_light_views(photo.shape[0], generator=self.gen if train else
                                             torch.Generator().manual_seed(0), device=self.device)
@@ -227,6 +239,9 @@ class StageTrainer:
             else:
                 base = ref[k].mean((0, 2, 3), keepdim=True).expand_as(ref[k])  # the set's mean value
             out[f"baseline_{k}"] = float(((base - ref[k]) ** 2).mean().sqrt())
+            if self.stage == "maps" and "physical" in b:  # what the network refines: it must do better
+                phys = refined_maps(b["physical"], torch.zeros_like(b["physical"]))[k]
+                out[f"physical_{k}"] = float(((phys - ref[k]) ** 2).mean().sqrt())
         module.train()
         return out
 
@@ -286,7 +301,8 @@ def record_provenance(out, trainer, val):
     prov = read_json(path)
     cfg = trainer.cfg
     prov.setdefault("stages", {})[trainer.stage] = {
-        "tier": cfg.tier, "variant": cfg.variant, "steps": trainer.step, "batch": cfg.batch, "size": cfg.size, "seed": cfg.seed,
+        "tier": cfg.tier, "variant": cfg.variant, "refine": cfg.refine,
+        "physical_version": PHYSICAL_VERSION if cfg.refine else None, "steps": trainer.step, "batch": cfg.batch, "size": cfg.size, "seed": cfg.seed,
         "device": str(trainer.device) + ("" if trainer.device.type != "cpu" else f" ({platform.processor() or platform.machine()}, {torch.get_num_threads()} threads)"),
         "seconds": round(trainer.elapsed, 1), "samples_seen": trainer.step * cfg.batch,
         "losses": {"adversarial": cfg.adversarial, "perceptual": cfg.perceptual} if trainer.stage == "aux" else None,
@@ -305,7 +321,8 @@ def load_trained(out, tier=None, device="cpu", stages=STAGES):
     recorded = list(read_json(os.path.join(out, "provenance.json")).get("stages", {}).values())
     tier = tier or (recorded[0].get("tier") if recorded else "fast")
     variant = recorded[0].get("variant", "chain") if recorded else "chain"
-    net = build(tier, pretrained=False, variant=variant).to(device)
+    refine = recorded[0].get("refine", False) if recorded else True  # runs before refinement existed: False
+    net = build(tier, pretrained=False, variant=variant, refine=refine).to(device)
     for s in stages:
         if s not in VARIANTS[variant]:
             continue
@@ -333,11 +350,14 @@ def load_trained(out, tier=None, device="cpu", stages=STAGES):
 @click.option("--val-every", default=100, show_default=True)
 @click.option("--shared", type=click.Path(file_okay=False), default=None,
               help="Shared data folder with materials/ (CC0 seeds); default ../shared/data.")
+@click.option("--refine/--no-refine", default=True, show_default=True,
+              help="The maps stage corrects the physical estimate (svbrdf_cli.physical) instead of predicting "
+                   "maps from scratch.")
 @click.option("--variant", type=click.Choice(tuple(VARIANTS)), default=None,
               help="chain: the paper's model; nomask / e2e: Table IV ablations (aux without masks; "
                    "one UNet from photo to maps with the chain's parameter count). Default: the tier's own.")
 def cli(stage, tier, out, steps, minutes, batch, size, device, seed, threads, fresh, no_adversarial,
-        checkpoint_every, val_every, shared, variant):
+        checkpoint_every, val_every, shared, refine, variant):
     """Train the model stage by stage."""
     if threads:
         torch.set_num_threads(threads)
@@ -350,7 +370,7 @@ def cli(stage, tier, out, steps, minutes, batch, size, device, seed, threads, fr
     out = out or os.path.join("runs", tier if variant == tier_variant(tier) else f"{tier}-{variant}")
     bank = D.SeedBank.find(shared)
     cfg = RunConfig(tier=tier, size=size, batch=batch, seed=seed, device=device, adversarial=not no_adversarial,
-                    variant=variant)
+                    variant=variant, refine=refine)
     stages = VARIANTS[variant] if stage == "all" else (stage,)
     for s in stages:
         share = ALL_SPLIT[s] / sum(ALL_SPLIT[x] for x in stages) if stage == "all" else 1.0

@@ -338,7 +338,8 @@ def capture(prepared, chain, out_root, opts, model_name="fast"):
                 names.append(f"confidence/{k}.png")
         if opts.debug:
             os.makedirs(os.path.join(tmp, "debug"))
-            debug = {"input": net_in, **{k: out[k] for k in ("M_b", "M_h", "I_bf", "I_hr", "I_hr2") if k in out}}
+            debug = {"input": net_in, **{k: out[k] for k in ("M_b", "M_h", "I_bf", "I_hr", "I_hr2", "flash_fit")
+                                         if k in out}}
             for k, v in debug.items():
                 write_image(os.path.join(tmp, "debug", f"{k}.png"), v)
                 names.append(f"debug/{k}.png")

@@ -203,6 +203,18 @@ FLASH_POSITION = (0.0, 0.0, CAMERA_HEIGHT)
 #: radiance: bright enough to show albedo, headroom for highlights.
 LIGHT_INTENSITY = 0.5 * CAMERA_HEIGHT ** 2
 
+#: Flash power of the validation inputs (and of a photo exposed as the tool exposes
+#: it): the point-light intensity at :data:`FLASH_POSITION` that reproduces the Des19
+#: inputs from their maps read as linear albedo. Fitted per sample on the pixels where
+#: the diffuse term dominates (specular under 10 % of it, none clipped): median 10.35
+#: over the 18 samples with enough such pixels, p10-p90 6.3-14.0
+#: (``python -m export.physical_eval --fit-flash``). The physical estimate
+#: (:mod:`svbrdf_cli.physical`) divides by it to put albedo on an absolute scale.
+FLASH_INTENSITY = 10.35
+
+#: Luminance weights (Rec. 709) of linear RGB.
+LUMA = (0.2126, 0.7152, 0.0722)
+
 #: Mean encoded brightness of a flash image after auto exposure: the median
 #: over the 29 Des19 validation inputs (their means span 0.11-0.60). Fitting
 #: the intensity that reproduces each input's brightness from its ground-truth

@@ -26,10 +26,16 @@ STAGES = ("masks", "aux", "maps")
 MODELS_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "models")
 #: Tiers, cheapest first: ``lite`` is one end-to-end UNet (maps.onnx only), the others the three-stage chain.
 TIERS = ("lite", "fast", "balanced", "best")
-#: What ``svbrdf capture`` runs without ``--model``.
-DEFAULT_MODEL = "fast"
+#: ``--model physical``: the maps computed from the flash physics alone (:mod:`svbrdf_cli.physical`).
+PHYSICAL = "physical"
+#: What ``svbrdf capture`` runs without ``--model``: the physical estimate, until a trained
+#: model beats it on Des19 (every map) and on the real 9-light card (docs/benchmarks.md).
+DEFAULT_MODEL = PHYSICAL
 #: ``--model auto``: per photo, the cheapest installed tier good enough for it (:mod:`svbrdf_cli.auto`).
 AUTO = "auto"
+#: The extra network input of models that refine the physical estimate: its four stored maps
+#: stacked as 10 channels (normal 3, diffuse 3, roughness 1, specular 3).
+PHYSICAL_INPUT = "physical"
 
 
 class ModelError(SvbrdfError):
@@ -79,6 +85,10 @@ def load_model(model, threads=0):
         from svbrdf_cli.auto import AutoModel
 
         return AutoModel(threads=threads)
+    if model == PHYSICAL:
+        from svbrdf_cli.physical import PhysicalModel
+
+        return PhysicalModel()
     return Chain(model_folder(model), threads=threads)
 
 
@@ -88,7 +98,7 @@ def check_model(model):
         from svbrdf_cli.auto import load_rule
 
         load_rule()
-    else:
+    elif model != PHYSICAL:
         model_folder(model)
 
 
@@ -110,8 +120,14 @@ class Chain:
             if meta.get("conventions") != cv.CONVENTIONS_VERSION:
                 raise ModelError(f"'{path}' was made for conventions version {meta.get('conventions')!r}, "
                                  f"this tool uses {cv.CONVENTIONS_VERSION!r}; re-export it.")
+            if PHYSICAL_INPUT in meta.get("inputs", "").split(","):
+                from svbrdf_cli.physical import PHYSICAL_VERSION
+
+                if meta.get("physical_version") != PHYSICAL_VERSION:
+                    raise ModelError(f"'{path}' refines version {meta.get('physical_version')!r} of the physical "
+                                     f"estimate, this tool computes version {PHYSICAL_VERSION!r}; retrain it.")
             self.sessions[stage], self.meta[stage] = sess, meta
-        given = {"photo"}
+        given = {"photo", PHYSICAL_INPUT}
         for stage in self.stages:
             need = set(self.meta[stage]["inputs"].split(",")) - given
             if need:
@@ -161,6 +177,14 @@ class Chain:
         padded = np.pad(img, ((0, ph), (0, pw), (0, 0)), mode="reflect" if (ph < h and pw < w) else "edge")
         x = np.ascontiguousarray(padded.transpose(2, 0, 1)[None])
         feeds = {"photo": x}
+        if any(PHYSICAL_INPUT in self.meta[s]["inputs"].split(",") for s in self.stages):
+            from svbrdf_cli.physical import estimate
+
+            t0 = time.perf_counter()
+            est, _ = estimate(padded)
+            feeds[PHYSICAL_INPUT] = np.ascontiguousarray(
+                np.concatenate([est[k] for k in cv.MAP_NAMES], -1).transpose(2, 0, 1)[None])
+            self.timings["physical"] = time.perf_counter() - t0
         for stage in self.stages:
             t0 = time.perf_counter()
             feeds.update(self._run(stage, feeds))

@@ -17,9 +17,17 @@ from svbrdf_cli.errors import MapSetError
 from svbrdf_cli.imageio import read_image, write_image
 
 
-def stored_to_linear(stored):
-    """Dict of stored-encoding HWC maps as read from disk -> linear maps."""
-    return cv.decode_maps({k: v[..., :MAP_CHANNELS[k]] for k, v in stored.items()})
+def stored_to_linear(stored, linear_albedo=False):
+    """Dict of stored-encoding HWC maps as read from disk -> linear maps.
+
+    ``linear_albedo``: the files hold diffuse and specular as linear albedo (the Des19
+    validation ground truth and the paper's outputs do), not our gamma-2.2 encoding.
+    """
+    maps = cv.decode_maps({k: v[..., :MAP_CHANNELS[k]] for k, v in stored.items()})
+    if linear_albedo:
+        for k in ("diffuse", "specular"):
+            maps[k] = stored[k][..., :MAP_CHANNELS[k]].clip(0.0, 1.0)
+    return maps
 
 
 def linear_to_stored(maps):
@@ -65,9 +73,10 @@ def read_stored_maps(folder, names=None):
     return stored
 
 
-def read_map_set(folder, names=None):
-    """Read a native map set (see :func:`read_stored_maps`) as linear HWC float32 maps."""
-    return stored_to_linear(read_stored_maps(folder, names))
+def read_map_set(folder, names=None, linear_albedo=False):
+    """Read a native map set (see :func:`read_stored_maps`) as linear HWC float32 maps
+    (``linear_albedo``: see :func:`stored_to_linear`)."""
+    return stored_to_linear(read_stored_maps(folder, names), linear_albedo=linear_albedo)
 
 
 def write_map_set(folder, maps, bits=8):

@@ -913,8 +913,9 @@ def generate(family, generator, batch, size, device=None, dtype=torch.float32):
     return out
 
 
-def random_materials(generator, batch, size, device=None, families=None, dtype=torch.float32):
-    """A batch of materials, each from a family drawn uniformly.
+def random_materials(generator, batch, size, device=None, families=None, dtype=torch.float32, metal_fraction=None):
+    """A batch of materials, each from a family drawn uniformly (or, with ``metal_fraction``, a metal
+    family with that probability and otherwise a dielectric one, each uniformly).
 
     Args:
         generator: the only source of randomness.
@@ -934,7 +935,15 @@ def random_materials(generator, batch, size, device=None, families=None, dtype=t
         if n not in FAMILIES:
             raise KeyError(f"unknown material family {n!r}")
     device = generator.device if device is None else torch.device(device)
-    pick = torch.randint(0, len(names), (batch,), generator=generator, device=generator.device).cpu().tolist()
+    if metal_fraction is None:
+        pick = torch.randint(0, len(names), (batch,), generator=generator, device=generator.device).cpu().tolist()
+    else:
+        metal = torch.tensor([n in METAL_FAMILIES for n in names], dtype=torch.float64)
+        if metal.sum() == 0 or metal.sum() == len(names):
+            w = torch.ones(len(names), dtype=torch.float64)
+        else:
+            w = torch.where(metal > 0, metal_fraction / metal.sum(), (1 - metal_fraction) / (len(names) - metal.sum()))
+        pick = torch.multinomial(w.to(generator.device).expand(batch, -1), 1, generator=generator)[:, 0].cpu().tolist()
     out = None
     for k, name in enumerate(names):
         idx = [i for i, p in enumerate(pick) if p == k]

@@ -8,8 +8,11 @@ ways a network must survive, so training inputs go through a camera model:
   half-widths: a square cropped from the middle of a phone photo sees a
   narrow field, a close-up a wide one); the lens off the surface centre (the
   highlight is not centred); the flash a little beside the lens;
-* **exposure**: auto exposure to a jittered mean brightness around
-  :data:`svbrdf_cli.conventions.AUTO_EXPOSURE_MEAN`;
+* **exposure**: either the flash power of the validation inputs
+  (:data:`svbrdf_cli.conventions.FLASH_INTENSITY`, compensated for the camera's distance and
+  jittered with the spread fitted on the Des19 inputs: they are rendered at one power, not
+  exposed per image), or auto exposure to a jittered mean brightness around
+  :data:`svbrdf_cli.conventions.AUTO_EXPOSURE_MEAN` (what ``svbrdf capture`` does to a photo);
 * **colour**: white-balance error (per-channel gains);
 * **optics**: vignetting (radial gain) and softening (Gaussian blur);
 * **sensor**: shot noise (variance proportional to the signal) and read
@@ -62,6 +65,13 @@ class CaptureRanges:
     exposure_mean: float = 0.36
     exposure_log_sigma: float = 0.25
     exposure_range: tuple = (0.11, 0.6)
+    #: Fraction of photos auto-exposed (the rest are lit at the flash power below).
+    auto_exposure_fraction: float = 0.5
+    #: Flash power: conventions.FLASH_INTENSITY x (camera height / the conventions') ^ 2 (the
+    #: same irradiance under the lens at any distance) x a log-normal jitter. Sigma 0.31 is the
+    #: spread of the Des19 inputs' fitted power (p10-p90 6.3-14.0 around the median 10.35,
+    #: ``python -m export.physical_eval --fit-flash``).
+    power_log_sigma: float = 0.31
     #: Optical softening (lens, demosaicing, downscaling): Gaussian sigma in
     #: pixels at 256² (scaled with the image size).
     blur: tuple = (0.0, 1.2)
@@ -92,7 +102,7 @@ CLEAN = dataclasses.replace(
 #: The paper's setting: flash at the lens, 45 degrees, centred, fixed exposure target.
 PAPER = dataclasses.replace(
     CLEAN, fov_degrees=(45.0, 45.0), centre_offset=0.0, flash_offset=(0.0, 0.0),
-    exposure_mean=cv.AUTO_EXPOSURE_MEAN, exposure_log_sigma=0.0)
+    exposure_mean=cv.AUTO_EXPOSURE_MEAN, exposure_log_sigma=0.0, auto_exposure_fraction=1.0)
 
 
 def _uniform(g, n, lo, hi, log=False):
@@ -112,7 +122,8 @@ def sample_capture(g, batch, ranges=DEFAULT_RANGES):
 
     Returns:
         dict of float64 tensors on ``g.device``: ``fov`` (B,) degrees,
-        ``camera`` and ``light`` (B, 3) positions, ``exposure`` (B,) target
+        ``camera`` and ``light`` (B, 3) positions, ``power`` (B,) flash
+        intensity (0: auto exposure instead), ``exposure`` (B,) the auto-exposure target
         mean, ``wb`` (B, 3) gains, ``vignetting``, ``blur`` (pixels at 256²), ``shot_noise``,
         ``read_noise``, ``contrast`` (B,), ``tone`` (B,) codes into
         :data:`TONE_CURVES`, ``jpeg`` (B,) quality (0: none).
@@ -133,7 +144,11 @@ def sample_capture(g, batch, ranges=DEFAULT_RANGES):
     tone = torch.multinomial(probs.expand(batch, -1), 1, generator=g)[:, 0]
     use_jpeg = torch.rand(batch, generator=g, device=g.device, dtype=torch.float64) < r.jpeg_probability
     quality = _uniform(g, batch, *r.jpeg_quality).round()
+    auto = torch.rand(batch, generator=g, device=g.device, dtype=torch.float64) < r.auto_exposure_fraction
+    power_jitter = (torch.randn(batch, generator=g, device=g.device, dtype=torch.float64) * r.power_log_sigma).exp()
+    power = cv.FLASH_INTENSITY * (height / cv.CAMERA_HEIGHT) ** 2 * power_jitter
     return {
+        "power": torch.where(auto, torch.zeros_like(power), power),
         "fov": fov, "camera": camera, "light": light, "exposure": exposure, "wb": wb,
         "vignetting": _uniform(g, batch, *r.vignetting),
         "blur": _uniform(g, batch, *r.blur),
@@ -214,6 +229,9 @@ def photograph(maps, capture, g=None, quantize=True):
     cam = capture["camera"].to(d)
     light = capture["light"].to(d)
     intensity = T.auto_exposure(maps, light=light, camera=cam, target=capture["exposure"].to(d))
+    if "power" in capture:  # lit at a known flash power where one is given (> 0)
+        power = capture["power"].to(d)
+        intensity = torch.where(power > 0, power.reshape(intensity.shape), intensity)
     linear = render_maps(maps, light=light, camera=cam, intensity=intensity)
     clean = cv.image_to_encoded(linear)
     p = surface_positions(d.shape[-2], d.shape[-1], d)

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import numpy as np
 import torch
 from torch import nn
 
@@ -78,14 +79,53 @@ def _centre(x):
     return x * 2.0 - 1.0
 
 
+#: Channels of the physical estimate as the networks take it: its stored maps stacked
+#: (normal 3, diffuse 3, roughness 1, specular 3), the runtime's ``physical`` input.
+PHYSICAL_CHANNELS = 10
+
+
+def physical_input(photo):
+    """(B, 3, H, W) encoded photos -> (B, 10, H, W) physical estimates (:mod:`svbrdf_cli.physical`, numpy,
+    no gradient), exactly what the runtime feeds an exported model's ``physical`` input."""
+    from svbrdf_cli.physical import estimate
+
+    arr = photo.detach().float().permute(0, 2, 3, 1).cpu().numpy()
+    est = [np.concatenate([estimate(a)[0][k] for k in cv.MAP_NAMES], -1) for a in arr]
+    return torch.from_numpy(np.stack(est)).permute(0, 3, 1, 2).to(photo)
+
+
+def refined_maps(physical, correction):
+    """The physical estimate (B, 10) plus a network's correction (B, 10) -> stored-encoding maps.
+
+    Normals add as vectors (the estimate's decoded normal plus the correction's xyz, renormalised, z
+    kept >= 1e-3); diffuse, roughness and specular add in the stored encoding and are clipped to
+    [0, 1]. A zero correction returns the estimate exactly.
+    """
+    n = cv.decode_normals(physical[:, :3], axis=1) + correction[:, :3]
+    n = torch.cat([n[:, :2], n[:, 2:3].clamp_min(1e-3)], 1)
+    rest = (physical[:, 3:] + correction[:, 3:]).clamp(0.0, 1.0)
+    return {"normal": cv.encode_normals(cv.normalize(n, axis=1)), "diffuse": rest[:, 0:3],
+            "roughness": rest[:, 3:4], "specular": rest[:, 4:7]}
+
+
+def _correction_unet(in_channels, out_channels, base, depth):
+    """A UNet whose output is a correction: no activation, and a zero head, so that before training
+    it corrects nothing (the chain returns the physical estimate)."""
+    net = UNet(in_channels, out_channels, base=base, depth=depth, out_activation=None)
+    nn.init.zeros_(net.decoder.head.weight)
+    nn.init.zeros_(net.decoder.head.bias)
+    return net
+
+
 class SVBRDFNet(nn.Module):
     """All stages; ``forward(photo)`` runs the whole chain."""
 
-    def __init__(self, tier="fast", pretrained=True, use_masks=True):
+    def __init__(self, tier="fast", pretrained=True, use_masks=True, refine=True):
         super().__init__()
         t = TIERS[tier] if isinstance(tier, str) else tier
         self.tier = tier if isinstance(tier, str) else "custom"
         self.use_masks = use_masks
+        self.refine = refine
         self.variant = "chain" if use_masks else "nomask"
         self.masks = nn.ModuleDict({
             "M_b": BackboneUNet(3, width=t.mask_width, pretrained=pretrained),
@@ -97,11 +137,19 @@ class SVBRDFNet(nn.Module):
             "I_bf": GADUNet(6, 3, base=t.aux_base, depth=t.depth),
             "I_hr": GADUNet(9, 6, base=t.aux_base, depth=t.depth),
         })
-        self.maps = nn.ModuleDict({
-            "normal": UNet(6, 3, base=t.map_base, depth=t.depth),
-            "diffuse_specular": UNet(9, 6, base=t.map_base, depth=t.depth),
-            "roughness": UNet(9, 1, base=t.map_base, depth=t.depth),
-        })
+        if refine:  # the maps UNets also see the physical estimate and predict corrections to it
+            p = PHYSICAL_CHANNELS
+            self.maps = nn.ModuleDict({
+                "normal": _correction_unet(6 + p, 3, t.map_base, t.depth),
+                "diffuse_specular": _correction_unet(9 + p, 6, t.map_base, t.depth),
+                "roughness": _correction_unet(9 + p, 1, t.map_base, t.depth),
+            })
+        else:
+            self.maps = nn.ModuleDict({
+                "normal": UNet(6, 3, base=t.map_base, depth=t.depth),
+                "diffuse_specular": UNet(9, 6, base=t.map_base, depth=t.depth),
+                "roughness": UNet(9, 1, base=t.map_base, depth=t.depth),
+            })
 
     def stage(self, name):
         return getattr(self, name)
@@ -119,8 +167,18 @@ class SVBRDFNet(nn.Module):
         return {"I_bf": self.aux["I_bf"](x_bf), "I_hr": hr[:, :3], "I_hr2": hr[:, 3:]}
 
     def run_maps(self, photo, aux):
+        """Maps from the photo and the aux renderings (and, for a refining net, ``aux["physical"]``:
+        the physical estimate, computed here when absent)."""
         x_n = torch.cat([_centre(photo), photo - aux["I_bf"]], 1)
         x_s = _centre(torch.cat([photo, aux["I_hr"], aux["I_hr2"]], 1))
+        if self.refine:
+            phys = aux.get("physical")
+            phys = physical_input(photo) if phys is None else phys
+            x_n = torch.cat([x_n, _centre(phys)], 1)
+            x_s = torch.cat([x_s, _centre(phys)], 1)
+            ds = self.maps["diffuse_specular"](x_s)
+            corr = torch.cat([self.maps["normal"](x_n), ds[:, :3], self.maps["roughness"](x_s), ds[:, 3:]], 1)
+            return refined_maps(phys, corr)
         # Offset by N_u: an untrained (or uncertain) network gives the flat
         # normal, and z = 2 * out_z stays >= 0 (normalising a near-zero vector
         # would give random, often downward, normals with useless gradients).
@@ -129,11 +187,11 @@ class SVBRDFNet(nn.Module):
         return {"normal": cv.encode_normals(n), "diffuse": ds[:, :3],
                 "roughness": self.maps["roughness"](x_s), "specular": ds[:, 3:]}
 
-    def forward(self, photo):
+    def forward(self, photo, physical=None):
         """Photo (B, 3, H, W) in [0, 1] -> dict of stored-encoding maps (and the intermediates)."""
         masks = self.run_masks(photo)
         aux = self.run_aux(photo, masks)
-        return {**masks, **aux, **self.run_maps(photo, aux)}
+        return {**masks, **aux, **self.run_maps(photo, {**aux, "physical": physical})}
 
 
 def _encode_maps_head(out, photo):
@@ -149,12 +207,14 @@ class EndToEndNet(nn.Module):
     whole chain of ``tier`` (:func:`e2e_base`).
     """
 
-    def __init__(self, tier="fast", base=None, depth=5):
+    def __init__(self, tier="fast", base=None, depth=5, refine=True):
         super().__init__()
         self.tier = tier if isinstance(tier, str) else "custom"
         self.variant = "e2e"
+        self.refine = refine
         self.base = base or e2e_base(tier)
-        self.maps = nn.ModuleDict({"all": UNet(3, 10, base=self.base, depth=depth)})
+        self.maps = nn.ModuleDict({"all": _correction_unet(3 + PHYSICAL_CHANNELS, 10, self.base, depth) if refine
+                                   else UNet(3, 10, base=self.base, depth=depth)})
 
     def stage(self, name):
         if name != "maps":
@@ -168,10 +228,14 @@ class EndToEndNet(nn.Module):
         return {}
 
     def run_maps(self, photo, aux=None):
+        if self.refine:
+            phys = (aux or {}).get("physical")
+            phys = physical_input(photo) if phys is None else phys
+            return refined_maps(phys, self.maps["all"](torch.cat([_centre(photo), _centre(phys)], 1)))
         return _encode_maps_head(self.maps["all"](_centre(photo)), photo)
 
-    def forward(self, photo):
-        return self.run_maps(photo)
+    def forward(self, photo, physical=None):
+        return self.run_maps(photo, {"physical": physical})
 
 
 def e2e_base(tier="fast"):
@@ -185,14 +249,15 @@ def e2e_base(tier="fast"):
     return min(range(8, 129, 4), key=lambda b: abs(count_parameters(UNet(3, 10, base=b)) - target))
 
 
-def build(tier="fast", pretrained=True, variant=None):
-    """A network of ``tier`` and ``variant`` (a key of :data:`VARIANTS`; default: the tier's own)."""
+def build(tier="fast", pretrained=True, variant=None, refine=True):
+    """A network of ``tier`` and ``variant`` (a key of :data:`VARIANTS`; default: the tier's own);
+    ``refine``: its maps stage corrects the physical estimate (False: the paper's plain maps UNets)."""
     variant = tier_variant(tier, variant) if isinstance(tier, str) else (variant or "chain")
     if variant == "e2e":
-        return EndToEndNet(tier)
+        return EndToEndNet(tier, refine=refine)
     if variant not in VARIANTS:
         raise ValueError(f"unknown variant {variant!r}; choose one of {', '.join(VARIANTS)}")
-    return SVBRDFNet(tier, pretrained=pretrained, use_masks=variant == "chain")
+    return SVBRDFNet(tier, pretrained=pretrained, use_masks=variant == "chain", refine=refine)
 
 
 def tier_costs(size=256):
@@ -202,7 +267,8 @@ def tier_costs(size=256):
     out = {}
     for name in E2E_TIERS:
         net = EndToEndNet(name)
-        out[name] = {"maps": (count_parameters(net), count_macs(net, (torch.zeros(1, 3, size, size),)))}
+        out[name] = {"maps": (count_parameters(net), count_macs(
+            net, (torch.zeros(1, 3, size, size), torch.zeros(1, PHYSICAL_CHANNELS, size, size))))}
     for name in TIERS:
         net = SVBRDFNet(name, pretrained=False)
         x = torch.zeros(1, 3, size, size)
@@ -217,7 +283,8 @@ def tier_costs(size=256):
                     return _net.run_aux(photo, {"M_b": photo, "M_h": photo})
             else:
                 def fn(photo, _net=net):
-                    return _net.run_maps(photo, {"I_bf": photo, "I_hr": photo, "I_hr2": photo})
+                    zero = photo.new_zeros(photo.shape[0], PHYSICAL_CHANNELS, *photo.shape[2:])
+                    return _net.run_maps(photo, {"I_bf": photo, "I_hr": photo, "I_hr2": photo, "physical": zero})
             wrapper = _StageCall(module, fn)
             row[stage] = (count_parameters(module), count_macs(wrapper, (x,)))
         out[name] = row

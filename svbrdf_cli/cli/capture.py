@@ -70,7 +70,8 @@ def capture_options(f):
         click.option("-o", "--output", required=True, type=click.Path(file_okay=False),
                      help="Folder for the texture sets: one sub-folder per photo, named after it."),
         click.option("--model", default=DEFAULT_MODEL, show_default=True,
-                     help="Model tier (lite, fast, balanced, best), 'auto' (per photo, the cheapest tier "
+                     help="'physical' (the maps computed from the flash physics: today's most accurate), a "
+                          "network tier (lite, fast, balanced, best), 'auto' (per photo, the cheapest tier "
                           "good enough for it) or a folder of exported models."),
         click.option("--preset", type=click.Choice(list(PRESETS)), default="svbrdf", show_default=True,
                      help="Texture-set layout (see 'svbrdf export --help')."),

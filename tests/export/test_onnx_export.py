@@ -5,20 +5,40 @@ import torch
 ort = pytest.importorskip("onnxruntime")
 pytest.importorskip("onnx")
 
-from export.nets.chain import SVBRDFNet, Tier  # noqa: E402
-from export.onnx_export import IO, export_stage  # noqa: E402
+from export.nets.chain import PHYSICAL_CHANNELS, SVBRDFNet, Tier  # noqa: E402
+from export.onnx_export import IO, PHYSICAL, export_stage, stage_io  # noqa: E402
 
 TINY = Tier(mask_width=0.25, aux_base=8, map_base=8, depth=3)
 
 
+def _net(refine=True):
+    """A tiny chain; a refining one gets random (not zero) correction heads, so that parity means something."""
+    net = SVBRDFNet(TINY, pretrained=False, refine=refine).eval()
+    if refine:
+        for m in net.maps.values():
+            torch.nn.init.normal_(m.decoder.head.weight, std=0.05)
+    return net
+
+
+def _feeds(net, stage, h, w):
+    feeds = {n: np.random.default_rng(i).random((1, PHYSICAL_CHANNELS if n == PHYSICAL else 3, h, w), dtype=np.float32)
+             for i, n in enumerate(stage_io(net, stage)[0])}
+    if PHYSICAL in feeds:  # an estimate's normals point up (stored x, y near 0.5, z near 1)
+        feeds[PHYSICAL][:, :2] = 0.4 + 0.2 * feeds[PHYSICAL][:, :2]
+        feeds[PHYSICAL][:, 2] = 1.0
+    return feeds
+
+
+@pytest.mark.parametrize("refine", [True, False])
 @pytest.mark.parametrize("stage", ["masks", "aux", "maps"])
-def test_stage_parity_with_onnxruntime(tmp_path, stage):
+def test_stage_parity_with_onnxruntime(tmp_path, stage, refine):
     torch.manual_seed(0)
-    net = SVBRDFNet(TINY, pretrained=False).eval()
+    net = _net(refine)
     path = export_stage(net, stage, str(tmp_path / f"{stage}.onnx"), size=64)
-    ins, outs = IO[stage]
+    ins, outs = stage_io(net, stage)
+    assert (PHYSICAL in ins) == (refine and stage == "maps")
     # A size other than the traced one: the graph is size-dynamic.
-    feeds = {n: np.random.default_rng(i).random((1, 3, 96, 64), dtype=np.float32) for i, n in enumerate(ins)}
+    feeds = _feeds(net, stage, 96, 64)
     sess = ort.InferenceSession(path, providers=["CPUExecutionProvider"])
     got = sess.run(list(outs), feeds)
     from export.onnx_export import _Stage
@@ -36,11 +56,11 @@ def test_float16_storage_halves_the_file_and_keeps_the_numbers(tmp_path):
     import os
 
     torch.manual_seed(0)
-    net = SVBRDFNet(TINY, pretrained=False).eval()
+    net = _net()
     full = export_stage(net, "maps", str(tmp_path / "f32.onnx"), size=64)
     half = export_stage(net, "maps", str(tmp_path / "f16.onnx"), size=64, weights="float16")
     assert os.path.getsize(half) < 0.6 * os.path.getsize(full)
-    feeds = {n: np.random.default_rng(i).random((1, 3, 64, 64), dtype=np.float32) for i, n in enumerate(IO["maps"][0])}
+    feeds = _feeds(net, "maps", 64, 64)
     a = ort.InferenceSession(full, providers=["CPUExecutionProvider"]).run(None, feeds)
     b = ort.InferenceSession(half, providers=["CPUExecutionProvider"]).run(None, feeds)
     for x, y in zip(a, b):
@@ -48,11 +68,12 @@ def test_float16_storage_halves_the_file_and_keeps_the_numbers(tmp_path):
 
 
 def test_runtime_chain_matches_torch(tmp_path):
-    """svbrdf_cli.inference.Chain (onnxruntime only) reproduces the torch chain, padding included."""
+    """svbrdf_cli.inference.Chain (onnxruntime only) reproduces the torch chain, padding and the
+    physical estimate it refines included."""
     from svbrdf_cli.inference import Chain
 
     torch.manual_seed(0)
-    net = SVBRDFNet(TINY, pretrained=False).eval()
+    net = _net()
     for stage in IO:
         export_stage(net, stage, str(tmp_path / f"{stage}.onnx"), size=64)
     img = np.random.default_rng(3).random((70, 90, 3), dtype=np.float32)  # not a multiple of 32
@@ -71,7 +92,7 @@ def test_runtime_chain_refuses_other_conventions(tmp_path):
 
     from svbrdf_cli.inference import Chain, ModelError
 
-    net = SVBRDFNet(TINY, pretrained=False).eval()
+    net = _net()
     for stage in IO:
         export_stage(net, stage, str(tmp_path / f"{stage}.onnx"), size=64)
     m = onnx.load(str(tmp_path / "aux.onnx"))
@@ -90,11 +111,11 @@ def test_int8_weights_stay_close(tmp_path):
     import os
 
     torch.manual_seed(0)
-    net = SVBRDFNet(TINY, pretrained=False).eval()
+    net = _net()
     full = export_stage(net, "maps", str(tmp_path / "f32.onnx"), size=64)
     q = export_stage(net, "maps", str(tmp_path / "i8.onnx"), size=64, weights="int8")
     assert os.path.getsize(q) < 0.4 * os.path.getsize(full)
-    feeds = {n: np.random.default_rng(i).random((1, 3, 64, 64), dtype=np.float32) for i, n in enumerate(IO["maps"][0])}
+    feeds = _feeds(net, "maps", 64, 64)
     a = ort.InferenceSession(full, providers=["CPUExecutionProvider"]).run(None, feeds)
     b = ort.InferenceSession(q, providers=["CPUExecutionProvider"]).run(None, feeds)
     for x, y in zip(a, b):
@@ -106,7 +127,7 @@ def test_end_to_end_baseline_exports_with_the_photo_only(tmp_path):
     from svbrdf_cli.inference import Chain
 
     torch.manual_seed(0)
-    net = EndToEndNet("fast", base=8, depth=3).eval()
+    net = EndToEndNet("fast", base=8, depth=3, refine=False).eval()
     export_stage(net, "maps", str(tmp_path / "maps.onnx"), size=64)
     img = np.random.default_rng(3).random((64, 64, 3), dtype=np.float32)
     out = Chain(tmp_path)(img)
@@ -114,3 +135,28 @@ def test_end_to_end_baseline_exports_with_the_photo_only(tmp_path):
         ref = net.run_maps(torch.from_numpy(img).permute(2, 0, 1)[None])
     for k, v in ref.items():
         assert np.abs(out[k] - v[0].permute(1, 2, 0).numpy()).max() < 1e-4
+
+
+def test_untrained_refining_models_return_the_physical_estimate(tmp_path):
+    """A freshly initialised chain and end-to-end net, exported and run by the runtime, give the
+    physical estimate back: weak networks cannot make the maps worse than physics by noise."""
+    from export.nets.chain import EndToEndNet
+    from svbrdf_cli.inference import Chain
+    from svbrdf_cli.physical import estimate
+
+    torch.manual_seed(0)
+    img = np.random.default_rng(5).random((64, 64, 3), dtype=np.float32) * 0.6
+    est, _ = estimate(img)
+    for name, net in (("chain", SVBRDFNet(TINY, pretrained=False).eval()),
+                      ("e2e", EndToEndNet("fast", base=8, depth=3).eval())):
+        folder = tmp_path / name
+        folder.mkdir()
+        for stage in (IO if name == "chain" else ("maps",)):
+            export_stage(net, stage, str(folder / f"{stage}.onnx"), size=64)
+        out = Chain(folder)(img)
+        for k, v in est.items():
+            assert np.abs(out[k] - v).max() < 1e-5, (name, k)
+        with torch.no_grad():
+            ref = net(torch.from_numpy(img).permute(2, 0, 1)[None])
+        for k, v in est.items():
+            assert np.abs(ref[k][0].permute(1, 2, 0).numpy() - v).max() < 1e-5, (name, k)

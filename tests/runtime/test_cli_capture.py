@@ -12,7 +12,7 @@ from click.testing import CliRunner
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.cli.main import cli
 from svbrdf_cli.imageio import read_image, write_image
-from svbrdf_cli.inference import installed_tiers
+from svbrdf_cli.inference import DEFAULT_MODEL, installed_tiers
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 SAMPLE = os.path.join(ROOT, "examples", "glazed_tiles.jpg")
@@ -43,7 +43,7 @@ def test_capture_writes_the_native_set_with_record_and_preview(tmp_path):
                                                   "preview.png", "material.json"])
     rec = json.loads((folder / "material.json").read_text())
     assert rec["crop"]["mode"] == "auto" and rec["crop"]["anchor"] == "highlight"
-    assert rec["size"] == 512 and rec["model"]["tier"] == "fast" and rec["input"]["width"] == 1024
+    assert rec["size"] == 512 and rec["model"]["tier"] == DEFAULT_MODEL and rec["input"]["width"] == 1024
     assert set(rec["timings_s"]) >= {"read", "crop", "network", "upsample", "write"}
     n = read_image(folder / "normal.png")
     assert n.shape == (512, 512, 3) and np.isfinite(n).all()
@@ -54,20 +54,23 @@ def test_capture_writes_the_native_set_with_record_and_preview(tmp_path):
 
 def test_debug_and_presets(tmp_path):
     photo = _photo(tmp_path / "wood.png")
-    code, out = run("capture", photo, "-o", tmp_path / "ue", "--preset", "unreal", "--debug")
+    code, out = run("capture", photo, "-o", tmp_path / "ue", "--preset", "unreal", "--debug", "--model", "fast")
     assert code == 0, out
     files = set(os.listdir(tmp_path / "ue" / "wood"))
     assert {"BaseColor.png", "Normal.png", "ORM.png", "Height.png", "texture_set.json", "material.json",
             "preview.png", "debug"} <= files
     assert sorted(os.listdir(tmp_path / "ue" / "wood" / "debug")) == sorted(
         f"{k}.png" for k in ("input", "M_b", "M_h", "I_bf", "I_hr", "I_hr2"))
+    code, out = run("capture", photo, "-o", tmp_path / "ph", "--debug", "--model", "physical")
+    assert code == 0, out
+    assert sorted(os.listdir(tmp_path / "ph" / "wood" / "debug")) == ["flash_fit.png", "input.png"]
     code, out = run("capture", photo, "-o", tmp_path / "gl", "--preset", "gltf", "--no-preview")
     assert code == 0 and "material.gltf" in os.listdir(tmp_path / "gl" / "wood")
     assert "preview.png" not in os.listdir(tmp_path / "gl" / "wood")
 
 
 def test_confidence_maps(tmp_path):
-    code, out = run("capture", SAMPLE, "-o", tmp_path, "--size", 256, "--confidence", "--no-preview")
+    code, out = run("capture", SAMPLE, "-o", tmp_path, "--size", 256, "--confidence", "--no-preview", "--model", "fast")
     assert code == 0, out
     folder = tmp_path / "glazed_tiles"
     assert sorted(os.listdir(folder / "confidence")) == sorted(f"{k}.png" for k in cv.MAP_NAMES)

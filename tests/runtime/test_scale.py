@@ -9,7 +9,7 @@ from click.testing import CliRunner
 
 from svbrdf_cli.cli.main import cli
 from svbrdf_cli.imageio import read_image, write_image
-from svbrdf_cli.inference import installed_tiers
+from svbrdf_cli.inference import DEFAULT_MODEL, installed_tiers
 
 ray = pytest.importorskip("ray", reason="the scale extra (Ray) is not installed")
 pytestmark = pytest.mark.skipif("fast" not in installed_tiers(), reason="the fast model is not installed")
@@ -57,7 +57,7 @@ def test_ray_engine_matches_the_local_engine(local_ray, photos, tmp_path):
             b = read_image(tmp_path / "ray" / f"shot{i}" / m)
             assert np.array_equal(a, b), (i, m)
         rec = json.loads((tmp_path / "ray" / f"shot{i}" / "material.json").read_text())
-        assert rec["crop"]["mode"] == "auto" and rec["model"]["tier"] == "fast"
+        assert rec["crop"]["mode"] == "auto" and rec["model"]["tier"] == DEFAULT_MODEL
 
 
 def test_ray_engine_resumes(local_ray, photos, tmp_path):

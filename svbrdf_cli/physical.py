@@ -1,0 +1,395 @@
+"""The physical estimate: all four maps from the photo and the flash geometry alone (numpy, no network).
+
+What a flash photo of a flat surface tells us for free, computed rather than learned:
+
+* **where the flash is**: a flat surface lit by a point light at the lens is brightest
+  straight under it, and its brightness falls off as ``H / d^3`` around that point. A
+  quadratic fitted to the blurred log-brightness finds the foot of the flash
+  (:func:`flash_foot`).
+* **the highlight, and from it roughness and specular**: with light and camera at the
+  same place, the mirror highlight of a flat surface sits at the same foot, and the
+  ring-averaged brightness over the diffuse falloff is ``D + F0 * lobe_alpha(rho) / s(rho)``.
+  Fitting that 1-D profile over a grid of roughness values gives the roughness (the lobe's
+  width) and ``F0`` times the flash power (its height) (:func:`fit_lobe`).
+* **diffuse**: the linear photo minus the fitted lobe, divided by the shading a flat
+  surface gets from the flash (``P * H / d^3``); pixels the highlight saturated or
+  dominates are filled in from their surroundings (:func:`diffuse_map`).
+* **specular**: dielectrics (the great majority of real surfaces) get F0 =
+  :data:`svbrdf_cli.conventions.DIELECTRIC_F0`; only a photo whose highlight is far too
+  strong for a dielectric over a dark diffuse is read as metal (:func:`specular_map`).
+* **normals**: with the light at the lens, shading says little about tilt at first order;
+  cavities are darker, so the high-passed log-brightness is read as height and its
+  gradient, scaled conservatively (:data:`NORMAL_STRENGTH`), tilts the normals
+  (:func:`normal_map`).
+
+**The absolute albedo level** cannot be recovered from one exposed photo (a darker surface
+under a stronger flash looks the same). The estimate takes the photo, as the tool exposes
+it (mean encoded brightness :data:`svbrdf_cli.conventions.AUTO_EXPOSURE_MEAN`) or as a
+validation input comes, to be lit by the flash power
+:data:`svbrdf_cli.conventions.FLASH_INTENSITY`: the one power that reproduces the Des19
+validation inputs from their maps (a convention of the data, see ``docs/conventions.md``).
+
+:class:`PhysicalModel` has the call interface of :class:`svbrdf_cli.inference.Chain`, so
+``svbrdf capture --model physical`` and the benchmarks run it like any model.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from svbrdf_cli import conventions as cv
+
+#: Bumped whenever the estimate's output changes: a network trained to refine one version
+#: must be fed that version (written into exported models and checked when they load).
+PHYSICAL_VERSION = "1"
+
+#: Roughness values the lobe fit tries (the lobe's width picks one).
+ROUGHNESS_GRID = np.linspace(0.08, 0.9, 42)
+#: Roughness where the photo shows no highlight to measure (a matte surface, or a lobe
+#: too wide to tell from the diffuse falloff).
+DEFAULT_ROUGHNESS = 0.6
+#: Rings of the radial profile around the flash foot.
+PROFILE_RINGS = 64
+#: Flash heights tried, as multiples of the assumed one (the falloff's steepness; the
+#: irradiance at the foot stays the convention's, so the albedo level does not move).
+HEIGHT_GRID = np.array([0.55, 0.65, 0.75, 0.87, 1.0, 1.15, 1.35, 1.6, 2.0])
+#: Metal: F0 (at the convention's flash power) above this, 2.5x any common dielectric's;
+#: mean diffuse under this fraction of F0; and a fit residual at most (1 - gain) x the
+#: dielectric hypothesis's.
+METAL_MIN_F0 = 0.1
+METAL_MAX_DIFFUSE = 0.3
+METAL_MIN_GAIN = 0.3
+#: Pixels where the fitted highlight makes more than this share of the photo's
+#: brightness, or that are clipped, take their diffuse from the surroundings.
+HIGHLIGHT_SHARE = 0.6
+#: Under the highlight, subtracting white leaves each channel at least this fraction of
+#: its scaled value.
+SUBTRACT_FLOOR = 0.25
+#: Encoded values at or above this are clipped.
+CLIPPED = 0.98
+#: Normals from shading (:func:`normal_map`): the high-pass scale (fraction of the image
+#: width), the regularisation of the tilt under the flash (squared lateral light
+#: component), and the strength: the strongest whose normal RMSE on 64 generated photos
+#: is within 1 % of the best (``python -m export.physical_eval --normals``). Measured, every
+#: strength above 0 raises the error (0.05: +1.1 % on generated photos, Des19 0.0633
+#: against the flat 0.0590, card_blue relight 0.154 against 0.151): albedo texture reads as
+#: tilt as much as relief does. So the estimate's normals are flat, and relief is left to
+#: the networks that refine it.
+HEIGHT_SCALE = 0.03
+TILT_EPS = 0.01
+NORMAL_STRENGTH = 0.0
+
+
+@dataclasses.dataclass
+class Geometry:
+    """Where the flash and camera are (surface units; the surface spans [-1, 1]^2)."""
+
+    height: float = cv.CAMERA_HEIGHT
+    intensity: float = cv.FLASH_INTENSITY
+    foot: tuple | None = None      # (x, y) under the flash; None: found from the photo
+    fixed_height: bool = False     # True: the falloff is the one of ``height``; False: fitted
+
+
+def _luma(x):
+    return x @ np.asarray(cv.LUMA, np.float32)
+
+
+def _blur(x, sigma):
+    import cv2
+
+    return cv2.GaussianBlur(np.ascontiguousarray(x, np.float32), (0, 0), float(sigma), borderType=cv2.BORDER_REFLECT)
+
+
+def _grid(h, w):
+    p = cv.surface_positions(h, w)
+    return p[..., 0].astype(np.float32), p[..., 1].astype(np.float32)
+
+
+def flash_foot(lum, clipped=None, limit=0.8):
+    """(x, y) of the point under the flash: the peak of a quadratic fitted to the blurred log-brightness.
+
+    Args:
+        lum: (H, W) linear brightness.
+        clipped: optional (H, W) bool; clipped pixels count as at least their neighbours.
+        limit: the foot is kept within +-``limit`` (a fit on a surface with no
+            visible falloff can wander).
+    """
+    h, w = lum.shape
+    b = _blur(np.maximum(lum, 1e-6), max(h, w) / 10.0)
+    step = max(1, min(h, w) // 48)
+    x, y = _grid(h, w)
+    x, y, z = x[::step, ::step].ravel(), y[::step, ::step].ravel(), np.log(b[::step, ::step]).ravel()
+    a = np.stack([np.ones_like(x), x, y, x * x + y * y], 1).astype(np.float64)
+    coef, *_ = np.linalg.lstsq(a, z.astype(np.float64), rcond=None)
+    c = coef[3]
+    if c >= -1e-3:  # no falloff peak: brightest blurred pixel
+        i = int(np.argmax(b))
+        return float(np.clip(cv.surface_positions(h, w)[i // w, i % w, 0], -limit, limit)), \
+            float(np.clip(cv.surface_positions(h, w)[i // w, i % w, 1], -limit, limit))
+    return float(np.clip(-coef[1] / (2 * c), -limit, limit)), float(np.clip(-coef[2] / (2 * c), -limit, limit))
+
+
+def lobe(d, height, roughness):
+    """Specular radiance per unit F0 and flash power of a flat surface, light at the lens.
+
+    n.h = n.l = n.v = H / d and v.h = 1 (so Fresnel is F0): ``pi * D * G/(4 nl nv) * nl / d^2``.
+    """
+    from svbrdf_cli.shading import ndf_ggx, visibility_smith_schlick
+
+    cos = height / d
+    a = cv.roughness_to_alpha(np.asarray(roughness, np.float64))
+    return np.pi * ndf_ggx(cos, a) * visibility_smith_schlick(cos, cos, a) * 0.25 * cos / (d * d)
+
+
+@dataclasses.dataclass
+class Lobe:
+    roughness: float
+    diffuse: float       # flash power x mean diffuse luminance (the profile's floor)
+    specular: float      # flash power x F0
+    height: float        # the flash height whose falloff fits best
+    metal: bool
+    gain: float          # fraction of the flat-profile residual the fit explains
+
+
+def _profile(lum, clipped, d, height):
+    """Ring-averaged ``lum`` around the flash foot: (radii, means, pixel counts) of usable rings."""
+    rho = np.sqrt(np.maximum(d * d - height * height, 0.0))
+    edges = np.linspace(0.0, float(rho.max()) + 1e-6, PROFILE_RINGS + 1)
+    ring = np.clip(np.digitize(rho, edges) - 1, 0, PROFILE_RINGS - 1).ravel()
+    good = ~clipped.ravel()
+    n = np.bincount(ring[good], minlength=PROFILE_RINGS).astype(np.float64)
+    total = np.bincount(ring, minlength=PROFILE_RINGS).astype(np.float64)
+    s = np.bincount(ring[good], weights=lum.ravel()[good].astype(np.float64), minlength=PROFILE_RINGS)
+    use = (n >= 4) & (n >= 0.5 * np.maximum(total, 1))
+    centres = 0.5 * (edges[:-1] + edges[1:])
+    return centres[use], s[use] / np.maximum(n[use], 1), n[use]
+
+
+def shading_at(rho, height, ref_height):
+    """Flat-surface diffuse shading per unit albedo and flash power at radius ``rho`` from the foot,
+    for a flash at ``height`` that gives the foot the irradiance of one at ``ref_height``."""
+    d = np.sqrt(rho * rho + height * height)
+    return height / d ** 3 * (height / ref_height) ** 2, d
+
+
+def fit_lobe(lum, clipped, d, geo):
+    """Fit the ring-averaged brightness around the foot with a flat surface's diffuse falloff plus its
+    flash highlight, over :data:`HEIGHT_GRID` x :data:`ROUGHNESS_GRID`.
+
+    Two hypotheses: a **dielectric** (the lobe's height fixed by F0 = 0.04 at the flash power) and
+    a **metal** (the lobe's height free). The metal wins only when its F0 is far above any
+    dielectric's (:data:`METAL_MIN_F0`) over a diffuse under :data:`METAL_MAX_DIFFUSE` of it, and
+    it fits clearly better (:data:`METAL_MIN_GAIN`).
+    """
+    P = geo.intensity
+    rho, prof, wts = _profile(lum, clipped, d, geo.height)
+    if len(rho) < 6:
+        return Lobe(DEFAULT_ROUGHNESS, float(np.median(lum / (geo.height ** -2))), cv.DIELECTRIC_F0 * P,
+                    geo.height, False, 0.0)
+    base = float((wts * prof).sum() / wts.sum())
+    res_flat = float((wts * (prof - base) ** 2).sum())
+    heights = np.array([geo.height]) if geo.fixed_height else geo.height * HEIGHT_GRID
+    # every (height, roughness) pair at once: s (H, 1, R) shading, g (H, G, R) lobe
+    sh, dd = shading_at(rho[None, :], heights[:, None], geo.height)
+    s = sh[:, None, :]
+    rgh = ROUGHNESS_GRID[None, :, None]
+    g = lobe(dd[:, None, :], heights[:, None, None], rgh) * (heights[:, None, None] / geo.height) ** 2
+    w = wts[None, None, :]
+    # dielectric: prof = c0 * s + 0.04 P g, c0 >= 0
+    y = prof - cv.DIELECTRIC_F0 * P * g
+    c0 = np.maximum((w * s * y).sum(-1) / (w * s * s).sum(-1), 0.0)
+    res_d = (w * (y - c0[..., None] * s) ** 2).sum(-1)
+    i = np.unravel_index(int(np.argmin(res_d)), res_d.shape)
+    best_d = (float(res_d[i]), float(ROUGHNESS_GRID[i[1]]), float(heights[i[0]]), float(c0[i]), cv.DIELECTRIC_F0 * P)
+    # metal: prof = c0 * s + c1 g, both >= 0 (2x2 normal equations)
+    sss, sgg, ssg = (w * s * s).sum(-1), (w * g * g).sum(-1), (w * s * g).sum(-1)
+    sy, gy = (w * s * prof).sum(-1), (w * g * prof).sum(-1)
+    det = np.maximum(sss * sgg - ssg * ssg, 1e-30)
+    m0, m1 = (sgg * sy - ssg * gy) / det, (sss * gy - ssg * sy) / det
+    res_m = (w * (prof - m0[..., None] * s - m1[..., None] * g) ** 2).sum(-1)
+    res_m = np.where((m0 >= 0) & (m1 > 0), res_m, np.inf)
+    j = np.unravel_index(int(np.argmin(res_m)), res_m.shape)
+    best_m = None if not np.isfinite(res_m[j]) else \
+        (float(res_m[j]), float(ROUGHNESS_GRID[j[1]]), float(heights[j[0]]), float(m0[j]), float(m1[j]))
+    metal = (best_m is not None and best_m[4] / P > METAL_MIN_F0 and best_m[3] / P < METAL_MAX_DIFFUSE * best_m[4] / P
+             and best_m[0] < (1.0 - METAL_MIN_GAIN) * best_d[0])
+    res, r, h, c0, c1 = best_m if metal else best_d
+    return Lobe(float(r), c0, c1, float(h), bool(metal), 1.0 - res / max(res_flat, 1e-20))
+
+
+def flatten_radial(diffuse, rho, rings=PROFILE_RINGS // 2):
+    """Divide out what is left of the flash in the diffuse: its mean log-brightness as a function of
+    the distance to the foot, smoothed, relative to the whole image's.
+
+    An albedo has no reason to brighten or darken with the distance to where the flash happened to
+    point, so any such trend is the model's mismatch (a highlight sharper than the fitted lobe, a
+    falloff steeper than the fitted height) and is removed; the mean level is kept.
+    """
+    logl = np.log(np.maximum(_luma(diffuse), 1e-5)).ravel().astype(np.float64)
+    edges = np.linspace(0.0, float(rho.max()) + 1e-6, rings + 1)
+    ring = np.clip(np.digitize(rho.ravel(), edges) - 1, 0, rings - 1)
+    n = np.bincount(ring, minlength=rings).astype(np.float64)
+    mean = np.bincount(ring, weights=logl, minlength=rings) / np.maximum(n, 1)
+    mean = np.where(n > 0, mean, np.nan)
+    valid = ~np.isnan(mean)
+    if valid.sum() < 3:
+        return diffuse
+    centres = 0.5 * (edges[:-1] + edges[1:])
+    mean = np.interp(centres, centres[valid], mean[valid])
+    smooth = np.convolve(np.pad(mean, 1, mode="edge"), np.ones(3) / 3, mode="valid")
+    level = float((n * smooth).sum() / n.sum())
+    trend = np.interp(rho.ravel(), centres, smooth - level).reshape(rho.shape)
+    return (diffuse * np.exp(-trend)[..., None]).astype(np.float32)
+
+
+def fill_from_surroundings(x, mask):
+    """``x`` (H, W, C) with the pixels of ``mask`` replaced from their surroundings (Telea inpainting)."""
+    import cv2
+
+    if not mask.any():
+        return x
+    if mask.mean() > 0.6:  # nothing left to fill from: the mean of the rest, or leave it
+        keep = ~mask
+        if keep.any():
+            x = x.copy()
+            x[mask] = x[keep].mean(0)
+        return x
+    lo, hi = float(x.min()), float(x.max())
+    scale = max(hi - lo, 1e-6)
+    u8 = np.clip((x - lo) / scale * 65535.0, 0, 65535).astype(np.float32)
+    m = mask.astype(np.uint8)
+    r = max(3, int(round(x.shape[0] / 64)))
+    m = cv2.dilate(m, np.ones((3, 3), np.uint8))
+    out = np.stack([cv2.inpaint(np.ascontiguousarray((u8[..., c] / 257).astype(np.uint8)), m, r, cv2.INPAINT_TELEA)
+                    for c in range(x.shape[-1])], -1).astype(np.float32) * 257 / 65535.0 * scale + lo
+    return np.where(m[..., None].astype(bool), out, x)
+
+
+def specular_map(fit, highlight_rgb, intensity):
+    """F0 (RGB) from the fitted lobe: the dielectric's, or a metal's tinted by its highlight's colour."""
+    if fit.metal:
+        tint = highlight_rgb / max(float(highlight_rgb.max()), 1e-6)
+        return np.clip(fit.specular / intensity * tint / max(float(_luma(tint[None])[0]), 1e-6),
+                       cv.DIELECTRIC_F0, 1.0).astype(np.float32)
+    return np.full(3, cv.DIELECTRIC_F0, np.float32)
+
+
+def normal_map(lum_albedo, light_xy, light_z, strength=None, scale=HEIGHT_SCALE):
+    """Normals from first-order flash shading, scaled by ``strength``.
+
+    With the light in direction ``l``, a small tilt ``t = (tx, ty)`` of the normal changes the
+    shading by ``(tx lx + ty ly) / lz`` relative to a flat surface. The relative brightness of each
+    pixel against its neighbourhood (a high-pass of the diffuse estimate's brightness, which the flash
+    falloff and the highlight have left) is read as that change, and the smallest tilt that explains
+    it is ``r lz l_xy / |l_xy|^2`` (regularised by :data:`TILT_EPS` under the flash, where the light
+    is straight above and the shading says nothing about tilt). Albedo texture reads as tilt too,
+    which is why ``strength`` is conservative.
+
+    Args:
+        lum_albedo: (H, W) diffuse brightness.
+        light_xy: (H, W, 2) lateral components of the unit direction to the flash (x right, y up).
+        light_z: (H, W) its vertical component.
+    """
+    strength = NORMAL_STRENGTH if strength is None else strength
+    h, w = lum_albedo.shape
+    lum = np.maximum(lum_albedo, 1e-4).astype(np.float32)
+    r = lum / _blur(lum, max(1.0, scale * 8 * w)) - 1.0
+    r = _blur(r, max(0.5, w / 512.0))
+    k = (strength * r * light_z / ((light_xy ** 2).sum(-1) + TILT_EPS))[..., None]
+    n = np.concatenate([k * light_xy, np.ones((h, w, 1), np.float32)], -1)
+    return cv.normalize(n).astype(np.float32)
+
+
+def estimate(image, geo=None, normal_strength=None, with_fit=False):
+    """The physical estimate of one photo.
+
+    Args:
+        image: (H, W, 3) encoded photo in [0, 1] (as the networks take it).
+        geo: :class:`Geometry` (default: the conventions' flash, foot found from the photo).
+        normal_strength: tilt from shading (default :data:`NORMAL_STRENGTH`; see :func:`normal_map`).
+        with_fit: also return the encoded image of a flat surface of uniform albedo under the
+            fitted flash (what the fit explains of the photo; ``--debug`` writes it).
+
+    Returns:
+        (dict of stored-encoding maps (HWC, roughness one channel), dict of what was found:
+        foot, flash height, roughness, F0, metal, fit gain[, the fitted image]).
+    """
+    geo = geo or Geometry()
+    img = np.asarray(image, np.float32)
+    h, w = img.shape[:2]
+    lin = cv.image_to_linear(img).astype(np.float32)
+    clipped = (img >= CLIPPED).any(-1)
+    lum = _luma(lin)
+    foot = geo.foot if geo.foot is not None else flash_foot(lum, clipped)
+    x, y = _grid(h, w)
+    rho = np.sqrt((x - foot[0]) ** 2 + (y - foot[1]) ** 2)
+    d0 = np.sqrt(rho * rho + geo.height ** 2)
+    fit = fit_lobe(lum, clipped, d0, geo)
+    shading, d = shading_at(rho, fit.height, geo.height)
+    spec = lobe(d, fit.height, fit.roughness).astype(np.float32) * (fit.height / geo.height) ** 2
+    spec_rad = fit.specular * spec  # luminance of the lobe
+    # The highlight's colour: the photo's where the lobe dominates (white balance is the flash's).
+    dom = (spec_rad > 2.0 * fit.diffuse * shading) & ~clipped
+    hl_rgb = lin[dom].mean(0) if dom.sum() >= 8 else np.ones(3, np.float32)
+    f0 = specular_map(fit, hl_rgb, geo.intensity)
+    # Diffuse: the photo over the fitted flat-surface profile (diffuse falloff plus highlight), times
+    # the fitted diffuse level. Where the diffuse dominates this is the photo over its flash shading;
+    # where the highlight does, the photo's texture is kept at the diffuse level instead of leaving a
+    # hole where the highlight was subtracted.
+    model = fit.diffuse * shading + spec_rad
+    # (the BRDF's diffuse term is d (1 - F0) / pi: the energy the specular reflects is not diffused)
+    keep = np.maximum(1.0 - f0, 0.05)  # a metal's F0 reaches 1: its diffuse is near 0 anyway
+    diffuse = (fit.diffuse / geo.intensity) * lin / np.maximum(model, 1e-6)[..., None] / keep
+    # The highlight is the flash's colour (white): taking its share of each pixel's brightness off
+    # every channel, rather than scaling the pixel, keeps the diffuse's saturation under it. No
+    # channel drops below SUBTRACT_FLOOR of its scaled value (a continuous floor: no seams).
+    share = (spec_rad / np.maximum(model, 1e-6))[..., None]
+    tint = f0 / max(float(_luma(f0[None])[0]), 1e-6)  # the highlight's colour, unit luminance
+    sub = (lin - share * lum[..., None] * tint) / (geo.intensity * shading[..., None]) / keep
+    diffuse = np.maximum(sub, SUBTRACT_FLOOR * diffuse)
+    bad = clipped
+    diffuse = fill_from_surroundings(np.clip(diffuse, 0.0, None).astype(np.float32), bad)
+    diffuse = flatten_radial(diffuse, rho)
+    diffuse = np.clip(np.nan_to_num(diffuse, nan=0.0, posinf=1.0), 0.0, 1.0).astype(np.float32)
+    dz = np.sqrt(rho * rho + fit.height ** 2)
+    light_xy = np.stack([foot[0] - x, foot[1] - y], -1) / dz[..., None]
+    normal = normal_map(_luma(diffuse), light_xy.astype(np.float32), (fit.height / dz).astype(np.float32),
+                        strength=normal_strength)
+    stored = {"normal": cv.encode_normals(normal).astype(np.float32),
+              "diffuse": cv.albedo_to_stored(diffuse).astype(np.float32),
+              "roughness": np.full((h, w, 1), fit.roughness, np.float32),
+              "specular": np.broadcast_to(cv.albedo_to_stored(f0), (h, w, 3)).astype(np.float32)}
+    # what the fit saw, for --debug: the flat surface of uniform albedo under the fitted flash
+    fitted = cv.image_to_encoded(np.repeat(model[..., None], 3, -1)).astype(np.float32)
+    found = {"flash_foot": [round(foot[0], 4), round(foot[1], 4)], "flash_height": round(fit.height, 4),
+             "roughness": round(fit.roughness, 4), "f0": [round(float(v), 4) for v in f0], "metal": fit.metal,
+             "fit_gain": round(float(fit.gain), 4), "flash_intensity": geo.intensity}
+    return (stored, found, fitted) if with_fit else (stored, found)
+
+
+class PhysicalModel:
+    """``--model physical``: :func:`estimate` behind :class:`svbrdf_cli.inference.Chain`'s interface."""
+
+    tier = "physical"
+    stages = ()
+
+    def __init__(self, geometry=None, threads=0):
+        self.geometry = geometry
+        self.timings = {}
+        self.found = {}
+
+    @property
+    def used(self):
+        return self
+
+    def describe(self):
+        return {"tier": self.tier, "method": "physical estimate (svbrdf_cli.physical)", "found": self.found}
+
+    def __call__(self, image):
+        t0 = time.perf_counter()
+        stored, self.found, fitted = estimate(image, self.geometry, with_fit=True)
+        self.timings = {"physical": time.perf_counter() - t0}
+        return {**stored, "flash_fit": fitted}
