@@ -23,36 +23,55 @@ def _linear(stored):
     return cv.decode_maps({k: v[..., :cv.MAP_CHANNELS[k]] for k, v in stored.items()})
 
 
-def test_flat_lambertian_plane_gives_its_albedo_back():
-    stored, found = P.estimate(_photo([0.3, 0.3, 0.3], 0.0, 0.5))
+def test_flat_matte_plane_gives_its_albedo_back():
+    """The nearest our BRDF has to a Lambertian plane: a dielectric (every surface the estimate
+    assumes has F0 = 0.04) at roughness 1."""
+    stored, found = P.estimate(_photo([0.3, 0.3, 0.3], cv.DIELECTRIC_F0, 1.0))
     d = _linear(stored)["diffuse"]
     assert np.abs(d.mean((0, 1)) / 0.3 - 1).max() < 0.02
     assert d.std() < 0.01  # no flash disc left in it
     assert not found["metal"]
 
 
+def test_lambertian_plane_gives_its_albedo_over_the_dielectric_share():
+    """A plane with no specular at all (F0 = 0): the estimate reads every surface as at least a
+    dielectric, whose diffuse term is d (1 - 0.04), so the albedo comes back as 0.3 / 0.96 (2 %)."""
+    stored, found = P.estimate(_photo([0.3, 0.3, 0.3], 0.0, 0.5))
+    d = _linear(stored)["diffuse"]
+    assert abs(d.mean() / (0.3 / (1 - cv.DIELECTRIC_F0)) - 1) < 0.02 and d.std() < 0.01
+
+
 @pytest.mark.parametrize("roughness", [0.25, 0.5, 0.8])
 def test_dielectric_plane_gives_albedo_f0_and_roughness(roughness):
     albedo = np.array([0.35, 0.2, 0.08])
-    stored, found = P.estimate(_photo(albedo, cv.DIELECTRIC_F0, roughness))
+    photo = _photo(albedo, cv.DIELECTRIC_F0, roughness)
+    stored, found = P.estimate(photo)
     lin = _linear(stored)
     assert np.abs(lin["diffuse"].mean((0, 1)) / albedo - 1).max() < 0.03
+    # its maps re-render the photo
+    again = render(lin["normal"], lin["diffuse"], lin["roughness"], lin["specular"], intensity=cv.FLASH_INTENSITY)
+    assert abs(cv.image_to_linear(photo).mean() / again.clip(0, 1).mean() - 1) < 0.03  # the photo clips
     assert np.allclose(lin["specular"], cv.DIELECTRIC_F0, atol=1e-3)
     assert found["metal"] is False
     assert abs(found["roughness"] - roughness) < 0.05
     assert np.allclose(lin["roughness"], found["roughness"])
 
 
+def test_metals_are_dielectric_unless_asked():
+    stored, found = P.estimate(_photo(0.0, [0.9, 0.7, 0.3], 0.3))
+    assert found["metal"] is False and np.allclose(_linear(stored)["specular"], cv.DIELECTRIC_F0, atol=1e-3)
+
+
 def test_metal_gives_its_coloured_f0():
     gold = np.array([0.9, 0.7, 0.3])
-    stored, found = P.estimate(_photo(0.0, gold, 0.3))
+    stored, found = P.estimate(_photo(0.0, gold, 0.3), metals=True)
     assert found["metal"] is True
     f0 = _linear(stored)["specular"].mean((0, 1))
     assert np.abs(f0 - gold).max() < 0.05
 
 
 def test_perfect_mirror_metal_stays_finite():
-    stored, found = P.estimate(_photo(0.0, 1.0, 0.3))
+    stored, found = P.estimate(_photo(0.0, 1.0, 0.3), metals=True)
     assert found["metal"] is True
     assert all(np.isfinite(v).all() for v in stored.values())
 
