@@ -6,22 +6,23 @@ What a flash photo of a flat surface tells us for free, computed rather than lea
   straight under it, and its brightness falls off as ``H / d^3`` around that point. A
   quadratic fitted to the blurred log-brightness finds the foot of the flash
   (:func:`flash_foot`).
-* **the highlight, and from it roughness and specular**: with light and camera at the
-  same place, the mirror highlight of a flat surface sits at the same foot, and the
-  ring-averaged brightness over the diffuse falloff is ``D + F0 * lobe_alpha(rho) / s(rho)``.
-  Fitting that 1-D profile over a grid of roughness values gives the roughness (the lobe's
-  width) and ``F0`` times the flash power (its height) (:func:`fit_lobe`).
-* **diffuse**: the linear photo minus the fitted lobe, divided by the shading a flat
-  surface gets from the flash (``P * H / d^3``); pixels the highlight saturated or
-  dominates are filled in from their surroundings (:func:`diffuse_map`).
+* **the highlight, and from it roughness**: with light and camera at the same place, the
+  mirror highlight of a flat surface sits at the same foot. The ring-averaged brightness
+  around it is fitted by the diffuse falloff ``c0 s(rho)`` plus the flash highlight
+  ``c1 lobe_r(rho)``, over flash heights and roughness values (:func:`fit_lobe`): the lobe's
+  width gives the roughness, ``c0`` the diffuse level.
+* **diffuse**: the linear photo less the fitted highlight's share of each pixel (taken off as
+  white, hue kept), divided by the shading a flat surface gets from the flash
+  (``P * H / d^3``) and by ``1 - F0``; pixels the highlight clipped or dominates are filled in
+  from their surroundings, and any trend with the distance to the foot is divided out.
 * **specular**: dielectrics (the great majority of real surfaces) get F0 =
   :data:`svbrdf_cli.conventions.DIELECTRIC_F0`. A metal hypothesis (a highlight far too strong
   for a dielectric over a dark diffuse) exists but is off by default (:data:`DETECT_METALS`:
   measured, it misreads dark dielectrics more often than it finds metals).
-* **normals**: with the light at the lens, shading says little about tilt at first order;
-  cavities are darker, so the high-passed log-brightness is read as height and its
-  gradient, scaled conservatively (:data:`NORMAL_STRENGTH`), tilts the normals
-  (:func:`normal_map`).
+* **normals**: with the light at the lens, a tilt changes the shading only in proportion to the
+  light's lateral component, and albedo texture changes it the same way. :func:`normal_map` reads
+  first-order flash shading as tilt, but measured, any strength raised the error, so the shipped
+  strength is 0 (:data:`NORMAL_STRENGTH`): flat normals, relief left to the refining networks.
 
 **The absolute albedo level** cannot be recovered from one exposed photo (a darker surface
 under a stronger flash looks the same). The estimate takes the photo, as the tool exposes
@@ -45,7 +46,7 @@ from svbrdf_cli import conventions as cv
 
 #: Bumped whenever the estimate's output changes: a network trained to refine one version
 #: must be fed that version (written into exported models and checked when they load).
-PHYSICAL_VERSION = "2"
+PHYSICAL_VERSION = "3"
 
 #: Roughness values the lobe fit tries (the lobe's width picks one).
 ROUGHNESS_GRID = np.linspace(0.08, 1.0, 47)
@@ -73,8 +74,9 @@ METAL_MIN_F0 = 0.1
 METAL_MAX_DIFFUSE = 0.3
 METAL_MIN_GAIN = 0.3
 #: Pixels where the fitted highlight makes more than this share of the photo's
-#: brightness, or that are clipped, take their diffuse from the surroundings.
-HIGHLIGHT_SHARE = 0.6
+#: brightness, or that are clipped, take their diffuse from the surroundings (what is
+#: left of them after the highlight is taken off is dark and grey: a hole in the diffuse).
+HIGHLIGHT_SHARE = 0.8
 #: Under the highlight, subtracting white leaves the weakest channel at least this
 #: fraction of its value (so no channel empties and the hue is kept).
 SUBTRACT_FLOOR = 0.25
@@ -370,7 +372,7 @@ def estimate(image, geo=None, normal_strength=None, with_fit=False, metals=None)
     tint = f0 / max(float(_luma(f0[None])[0]), 1e-6)  # the highlight's colour, unit luminance
     white = np.minimum(share * lum[..., None], (1.0 - SUBTRACT_FLOOR) * (lin / tint).min(-1, keepdims=True))
     diffuse = (lin - white * tint) / (geo.intensity * shading[..., None]) / keep
-    bad = clipped
+    bad = clipped | (share[..., 0] > HIGHLIGHT_SHARE)  # what is left there is mostly the highlight's
     diffuse = fill_from_surroundings(np.clip(diffuse, 0.0, None).astype(np.float32), bad)
     diffuse = flatten_radial(diffuse, rho)
     diffuse = np.clip(np.nan_to_num(diffuse, nan=0.0, posinf=1.0), 0.0, 1.0).astype(np.float32)

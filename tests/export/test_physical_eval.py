@@ -1,0 +1,48 @@
+"""The physical estimate against the floor on the validation sets, and its colour on the real photos
+(the numbers of docs/benchmarks.md, kept from regressing). Skipped without ../shared."""
+
+import os
+import tempfile
+
+import numpy as np
+import pytest
+
+from export import colour
+from export import methods as M
+
+
+def test_physical_beats_the_floor_on_des19_and_the_card(shared_data):
+    from export.benchmark import NineLights, des19_accuracy
+    from export.evaluate import load_des19
+
+    des19 = str(shared_data / "validation" / "des19")
+    samples = load_des19(des19)
+    floor, phys = M.Floor(), M.Physical()
+    f, _ = des19_accuracy(floor, samples, des19, tempfile.mkdtemp())
+    p, _ = des19_accuracy(phys, samples, des19, tempfile.mkdtemp())
+    assert p["diffuse"] < 0.6 * f["diffuse"] and p["roughness"] < f["roughness"]
+    assert p["relight"] < 0.8 * f["relight"]
+    assert p["specular"] <= f["specular"] + 1e-4 and p["normal"] <= f["normal"] + 1e-4
+    nine = NineLights(str(shared_data / "real" / "card_blue_9lights"))
+    x = nine.network_input()
+    assert nine.relight_rmse(phys(x)) < 0.9 * nine.relight_rmse(floor(x))
+
+
+def test_physical_keeps_the_colour_of_the_real_photos(shared_data):
+    from export import stability as S
+
+    real = S.real_crops(shared_data / "real", S.REAL_PHOTOS)
+    rows = colour.evaluate([M.Physical()], real, log=lambda *a: None)["physical"]
+    assert len(rows) == S.REAL_PHOTOS
+    assert all(r["ok"] is not False for r in rows), [r for r in rows if r["ok"] is False]
+
+
+def test_colour_fidelity_on_constructed_images():
+    rng = np.random.default_rng(0)
+    photo = np.clip(np.array([0.6, 0.3, 0.2]) * (0.7 + 0.3 * rng.random((32, 32, 1))), 0, 1).astype(np.float32)
+    same = colour.fidelity(photo, photo)
+    assert same["hue_error"] < 1 and same["ok"] is True
+    shifted = colour.fidelity(photo, photo[..., ::-1].copy())  # red-orange -> blue
+    assert shifted["hue_error"] > 90 and shifted["ok"] is False
+    grey = np.full((32, 32, 3), 0.4, np.float32)
+    assert colour.fidelity(grey, grey)["ok"] is True and colour.fidelity(grey, photo)["ok"] is False
