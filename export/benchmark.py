@@ -268,12 +268,13 @@ def run(limit=None, repeat=5, figures="docs/figures", tables="docs/tables", stab
     work = tempfile.mkdtemp(prefix="svbrdf-bench-")
     rows, per_sample = [], {}
     methods = M.available(threads)
+    nine_input = nine.network_input() if nine else None
     for method in methods:
         r = {"name": method.name, "label": method.label}
         acc, per_sample[method.name] = des19_accuracy(method, samples, des19, os.path.join(work, method.name))
         r.update({k if k in MAPS else "des19_relight": v for k, v in acc.items()})
         if nine:
-            r["real_relight"] = nine.relight_rmse(method(nine.network_input()))
+            r["real_relight"] = nine.relight_rmse(method(nine_input))
         r.update(timings(method, repeat))
         rows.append(r)
         log(f"{method.name:6s} " + "  ".join(f"{k}={v:.4f}" for k, v in r.items() if isinstance(v, float)))
@@ -297,13 +298,14 @@ def run(limit=None, repeat=5, figures="docs/figures", tables="docs/tables", stab
     conf_tier = tier if tier != "physical" or "fast" not in by_name else "fast"
     results["confidence"] = {"tier": conf_tier, "maps": confidence_evidence(by_name[conf_tier].chain, samples)}
     real = S.real_crops(root / "real", limit or S.REAL_PHOTOS) if os.path.isdir(root / "real") else []
+    real_inputs = [(name, network_input(lin)) for name, lin in real]  # once, for colour and auto
     from export import colour
 
-    results["colour"] = colour.evaluate(methods, real, log=log)
+    results["colour"] = colour.evaluate(methods, real_inputs, log=log)
     if "auto" in by_name:
         rule = by_name["auto"].model.rule
         tiers = {t: by_name[t].chain for t in rule["ladder"]}
-        results["auto"] = {"rule": rule, "sets": auto_evidence(rule, samples, nine, [network_input(lin) for _, lin in real],
+        results["auto"] = {"rule": rule, "sets": auto_evidence(rule, samples, nine, [x for _, x in real_inputs],
                                                                chains=tiers, log=log)}
         # The shipped rule's calibration, run again (python -m export.auto, without writing the rule).
         fresh = calibrate(generated(8 if limit else CALIBRATION_SAMPLES), chains=tiers, repeat=repeat, log=log)

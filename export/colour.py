@@ -24,6 +24,8 @@ import os
 import click
 import numpy as np
 
+from svbrdf_cli import conventions as cv
+
 #: Photos more saturated than this have a hue to keep.
 SATURATED = 0.15
 #: Photos less saturated than this count as near-neutral.
@@ -58,7 +60,7 @@ def hue_difference(a, b):
 def fidelity(photo, diffuse):
     """{photo_hue, photo_saturation, diffuse_hue, diffuse_saturation, hue_error (None when the photo is
     near-grey), ok} for one photo (encoded network input) and its stored diffuse."""
-    lum = photo @ np.array([0.2126, 0.7152, 0.0722], np.float32)
+    lum = photo @ np.asarray(cv.LUMA, np.float32)
     keep = (photo < 0.98).all(-1) & (lum <= np.percentile(lum, 90))
     ph, ps = colour_stats(photo, keep)
     dh, ds = colour_stats(np.asarray(diffuse)[..., :3], keep)
@@ -73,11 +75,9 @@ def fidelity(photo, diffuse):
             "hue_error": err, "ok": ok}
 
 
-def evaluate(methods, real, log=print):
-    """{method: [fidelity row per photo]} for ``real`` = [(name, linear crop at network size)]."""
-    from svbrdf_cli.capture import network_input
-
-    inputs = [(name, network_input(lin)) for name, lin in real]
+def evaluate(methods, inputs, log=print):
+    """{method: [fidelity row per photo]} for ``inputs`` = [(name, network input)] (the real photos
+    cropped and exposed as ``svbrdf capture`` does: :func:`svbrdf_cli.capture.network_input`)."""
     out = {}
     for m in methods:
         rows = []
@@ -118,8 +118,10 @@ def cli(tables):
     from export import stability as S
     from export.files import shared_root
 
+    from svbrdf_cli.capture import network_input
+
     real = S.real_crops(shared_root() / "data" / "real", S.REAL_PHOTOS)
-    res = evaluate(M.available(), real, log=click.echo)
+    res = evaluate(M.available(), [(name, network_input(lin)) for name, lin in real], log=click.echo)
     os.makedirs(tables, exist_ok=True)
     text = table(res)
     with open(os.path.join(tables, "colour.md"), "w") as f:

@@ -80,14 +80,8 @@ def normal_sweep(strengths, count=64, log=print):
     gt = cv.encode_normals(maps["normal"])
     res = {}
     for s in strengths:
-        errs = []
-        physical.NORMAL_STRENGTH, saved = s, physical.NORMAL_STRENGTH
-        try:
-            for i, p in enumerate(photos):
-                stored, _ = physical.estimate(p)
-                errs.append(float(np.sqrt(((stored["normal"] - gt[i]) ** 2).mean())))
-        finally:
-            physical.NORMAL_STRENGTH = saved
+        errs = [float(np.sqrt(((physical.estimate(p, normal_strength=s)[0]["normal"] - gt[i]) ** 2).mean()))
+                for i, p in enumerate(photos)]
         res[s] = float(np.mean(errs))
         log(f"strength {s:.4f}: normal RMSE {res[s]:.4f}")
     best = min(res.values())
@@ -97,16 +91,15 @@ def normal_sweep(strengths, count=64, log=print):
 
 
 @click.command()
-@click.option("--fit-flash", is_flag=True, help="Fit the Des19 inputs' flash power (a convention).")
+@click.option("--fit-flash", "flash", is_flag=True, help="Fit the Des19 inputs' flash power (a convention).")
 @click.option("--normals", is_flag=True, help="Normal RMSE against strength on generated photos.")
 @click.option("--count", default=64, show_default=True)
-def cli(fit_flash, normals, count):
+def cli(flash, normals, count):
     """Calibrate and check the physical estimate."""
     from export.files import shared_root
 
-    if fit_flash:
-        fit_flash_fn = globals()["fit_flash"]
-        fit_flash_fn(str(shared_root() / "data" / "validation" / "des19"), log=click.echo)
+    if flash:
+        fit_flash(str(shared_root() / "data" / "validation" / "des19"), log=click.echo)
     if normals:
         normal_sweep([0.0, 0.05, 0.1, 0.2, 0.3, 0.5, 0.8], count=count, log=click.echo)
 

@@ -156,7 +156,7 @@ def upsample_maps(stored, photo_low, photo_high, method="guided"):
         return dict(stored)
     if method not in ("guided", "bicubic"):
         raise ValueError(f"unknown upsampling method {method!r}")
-    lum = np.array([0.2126, 0.7152, 0.0722], np.float32)
+    lum = np.asarray(cv.LUMA, np.float32)
     gl, gh = photo_low @ lum, photo_high @ lum
     out = {}
     for k, v in stored.items():

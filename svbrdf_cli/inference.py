@@ -178,12 +178,10 @@ class Chain:
         x = np.ascontiguousarray(padded.transpose(2, 0, 1)[None])
         feeds = {"photo": x}
         if any(PHYSICAL_INPUT in self.meta[s]["inputs"].split(",") for s in self.stages):
-            from svbrdf_cli.physical import estimate
+            from svbrdf_cli import physical
 
             t0 = time.perf_counter()
-            est, _ = estimate(padded)
-            feeds[PHYSICAL_INPUT] = np.ascontiguousarray(
-                np.concatenate([est[k] for k in cv.MAP_NAMES], -1).transpose(2, 0, 1)[None])
+            feeds[PHYSICAL_INPUT] = np.ascontiguousarray(physical.network_input(padded).transpose(2, 0, 1)[None])
             self.timings["physical"] = time.perf_counter() - t0
         for stage in self.stages:
             t0 = time.perf_counter()

@@ -102,7 +102,6 @@ class Geometry:
     height: float = cv.CAMERA_HEIGHT
     intensity: float = cv.FLASH_INTENSITY
     foot: tuple | None = None      # (x, y) under the flash; None: found from the photo
-    fixed_height: bool = False     # True: the falloff is the one of ``height``; False: fitted
 
 
 def _luma(x):
@@ -120,27 +119,25 @@ def _grid(h, w):
     return p[..., 0].astype(np.float32), p[..., 1].astype(np.float32)
 
 
-def flash_foot(lum, clipped=None, limit=0.8):
+def flash_foot(lum, x, y, limit=0.8):
     """(x, y) of the point under the flash: the peak of a quadratic fitted to the blurred log-brightness.
 
     Args:
         lum: (H, W) linear brightness.
-        clipped: optional (H, W) bool; clipped pixels count as at least their neighbours.
+        x, y: (H, W) surface positions of the pixels (:func:`_grid`).
         limit: the foot is kept within +-``limit`` (a fit on a surface with no
             visible falloff can wander).
     """
     h, w = lum.shape
     b = _blur(np.maximum(lum, 1e-6), max(h, w) / 10.0)
     step = max(1, min(h, w) // 48)
-    x, y = _grid(h, w)
-    x, y, z = x[::step, ::step].ravel(), y[::step, ::step].ravel(), np.log(b[::step, ::step]).ravel()
-    a = np.stack([np.ones_like(x), x, y, x * x + y * y], 1).astype(np.float64)
+    xs, ys, z = x[::step, ::step].ravel(), y[::step, ::step].ravel(), np.log(b[::step, ::step]).ravel()
+    a = np.stack([np.ones_like(xs), xs, ys, xs * xs + ys * ys], 1).astype(np.float64)
     coef, *_ = np.linalg.lstsq(a, z.astype(np.float64), rcond=None)
     c = coef[3]
     if c >= -1e-3:  # no falloff peak: brightest blurred pixel
-        i = int(np.argmax(b))
-        return float(np.clip(cv.surface_positions(h, w)[i // w, i % w, 0], -limit, limit)), \
-            float(np.clip(cv.surface_positions(h, w)[i // w, i % w, 1], -limit, limit))
+        i = np.unravel_index(int(np.argmax(b)), b.shape)
+        return float(np.clip(x[i], -limit, limit)), float(np.clip(y[i], -limit, limit))
     return float(np.clip(-coef[1] / (2 * c), -limit, limit)), float(np.clip(-coef[2] / (2 * c), -limit, limit))
 
 
@@ -166,17 +163,21 @@ class Lobe:
     gain: float          # fraction of the flat-profile residual the fit explains
 
 
-def _profile(lum, clipped, d, height):
+def _rings(rho, count):
+    """Equal-width rings of ``rho`` (distance to the foot) out to its maximum: (ring of each pixel, flat;
+    ring centres)."""
+    edges = np.linspace(0.0, float(rho.max()) + 1e-6, count + 1)
+    return np.clip(np.digitize(rho.ravel(), edges) - 1, 0, count - 1), 0.5 * (edges[:-1] + edges[1:])
+
+
+def _profile(lum, clipped, rho):
     """Ring-averaged ``lum`` around the flash foot: (radii, means, pixel counts) of usable rings."""
-    rho = np.sqrt(np.maximum(d * d - height * height, 0.0))
-    edges = np.linspace(0.0, float(rho.max()) + 1e-6, PROFILE_RINGS + 1)
-    ring = np.clip(np.digitize(rho, edges) - 1, 0, PROFILE_RINGS - 1).ravel()
+    ring, centres = _rings(rho, PROFILE_RINGS)
     good = ~clipped.ravel()
     n = np.bincount(ring[good], minlength=PROFILE_RINGS).astype(np.float64)
     total = np.bincount(ring, minlength=PROFILE_RINGS).astype(np.float64)
     s = np.bincount(ring[good], weights=lum.ravel()[good].astype(np.float64), minlength=PROFILE_RINGS)
     use = (n >= 4) & (n >= 0.5 * np.maximum(total, 1))
-    centres = 0.5 * (edges[:-1] + edges[1:])
     return centres[use], s[use] / np.maximum(n[use], 1), n[use]
 
 
@@ -187,7 +188,7 @@ def shading_at(rho, height, ref_height):
     return height / d ** 3 * (height / ref_height) ** 2, d
 
 
-def fit_lobe(lum, clipped, d, geo, metals=False):
+def fit_lobe(lum, clipped, rho, geo, metals=False):
     """Fit the ring-averaged brightness around the foot with a flat surface's diffuse falloff plus its
     flash highlight, over :data:`HEIGHT_GRID` x :data:`ROUGHNESS_GRID`.
 
@@ -200,13 +201,13 @@ def fit_lobe(lum, clipped, d, geo, metals=False):
     height is fitted, only the diffuse level is read at the convention's flash power.
     """
     P = geo.intensity
-    rho, prof, wts = _profile(lum, clipped, d, geo.height)
+    rho, prof, wts = _profile(lum, clipped, rho)
     if len(rho) < 6:
         return Lobe(DEFAULT_ROUGHNESS, float(np.median(lum / (geo.height ** -2))), cv.DIELECTRIC_F0 * P,
                     geo.height, False, 0.0)
     base = float((wts * prof).sum() / wts.sum())
     res_flat = float((wts * (prof - base) ** 2).sum())
-    heights = np.array([geo.height]) if geo.fixed_height else geo.height * HEIGHT_GRID
+    heights = geo.height * HEIGHT_GRID
     # every (height, roughness) pair at once: s (H, 1, R) shading, g (H, G, R) lobe
     sh, dd = shading_at(rho[None, :], heights[:, None], geo.height)
     s = sh[:, None, :]
@@ -250,15 +251,13 @@ def flatten_radial(diffuse, rho, rings=PROFILE_RINGS // 2):
     falloff steeper than the fitted height) and is removed; the mean level is kept.
     """
     logl = np.log(np.maximum(_luma(diffuse), 1e-5)).ravel().astype(np.float64)
-    edges = np.linspace(0.0, float(rho.max()) + 1e-6, rings + 1)
-    ring = np.clip(np.digitize(rho.ravel(), edges) - 1, 0, rings - 1)
+    ring, centres = _rings(rho, rings)
     n = np.bincount(ring, minlength=rings).astype(np.float64)
     mean = np.bincount(ring, weights=logl, minlength=rings) / np.maximum(n, 1)
     mean = np.where(n > 0, mean, np.nan)
     valid = ~np.isnan(mean)
     if valid.sum() < 3:
         return diffuse
-    centres = 0.5 * (edges[:-1] + edges[1:])
     mean = np.interp(centres, centres[valid], mean[valid])
     smooth = np.convolve(np.pad(mean, 1, mode="edge"), np.ones(3) / 3, mode="valid")
     level = float((n * smooth).sum() / n.sum())
@@ -289,9 +288,12 @@ def fill_from_surroundings(x, mask):
     return np.where(m[..., None].astype(bool), out, x)
 
 
-def specular_map(fit, highlight_rgb, intensity):
-    """F0 (RGB) from the fitted lobe: the dielectric's, or a metal's tinted by its highlight's colour."""
+def specular_map(fit, lin, clipped, dominated, intensity):
+    """F0 (RGB) from the fitted lobe: the dielectric's, or a metal's tinted by its highlight's colour
+    (the photo's where the lobe dominates and nothing clipped; white balance is the flash's)."""
     if fit.metal:
+        dom = dominated & ~clipped
+        highlight_rgb = lin[dom].mean(0) if dom.sum() >= 8 else np.ones(3, np.float32)
         tint = highlight_rgb / max(float(highlight_rgb.max()), 1e-6)
         return np.clip(fit.specular / intensity * tint / max(float(_luma(tint[None])[0]), 1e-6),
                        cv.DIELECTRIC_F0, 1.0).astype(np.float32)
@@ -345,18 +347,14 @@ def estimate(image, geo=None, normal_strength=None, with_fit=False, metals=None)
     lin = cv.image_to_linear(img).astype(np.float32)
     clipped = (img >= CLIPPED).any(-1)
     lum = _luma(lin)
-    foot = geo.foot if geo.foot is not None else flash_foot(lum, clipped)
     x, y = _grid(h, w)
+    foot = geo.foot if geo.foot is not None else flash_foot(lum, x, y)
     rho = np.sqrt((x - foot[0]) ** 2 + (y - foot[1]) ** 2)
-    d0 = np.sqrt(rho * rho + geo.height ** 2)
-    fit = fit_lobe(lum, clipped, d0, geo, metals=DETECT_METALS if metals is None else metals)
+    fit = fit_lobe(lum, clipped, rho, geo, metals=DETECT_METALS if metals is None else metals)
     shading, d = shading_at(rho, fit.height, geo.height)
     spec = lobe(d, fit.height, fit.roughness).astype(np.float32) * (fit.height / geo.height) ** 2
     spec_rad = fit.specular * spec  # luminance of the lobe
-    # The highlight's colour: the photo's where the lobe dominates (white balance is the flash's).
-    dom = (spec_rad > 2.0 * fit.diffuse * shading) & ~clipped
-    hl_rgb = lin[dom].mean(0) if dom.sum() >= 8 else np.ones(3, np.float32)
-    f0 = specular_map(fit, hl_rgb, geo.intensity)
+    f0 = specular_map(fit, lin, clipped, spec_rad > 2.0 * fit.diffuse * shading, geo.intensity)
     # Diffuse: the photo less the fitted highlight's share of each pixel, over the flash shading. The
     # share (lobe over the fitted flat-surface profile), not the lobe's absolute radiance, is taken
     # off: where the highlight is brighter or sharper than fitted, the photo's texture is kept at the
@@ -376,9 +374,8 @@ def estimate(image, geo=None, normal_strength=None, with_fit=False, metals=None)
     diffuse = fill_from_surroundings(np.clip(diffuse, 0.0, None).astype(np.float32), bad)
     diffuse = flatten_radial(diffuse, rho)
     diffuse = np.clip(np.nan_to_num(diffuse, nan=0.0, posinf=1.0), 0.0, 1.0).astype(np.float32)
-    dz = np.sqrt(rho * rho + fit.height ** 2)
-    light_xy = np.stack([foot[0] - x, foot[1] - y], -1) / dz[..., None]
-    normal = normal_map(_luma(diffuse), light_xy.astype(np.float32), (fit.height / dz).astype(np.float32),
+    light_xy = np.stack([foot[0] - x, foot[1] - y], -1) / d[..., None]
+    normal = normal_map(_luma(diffuse), light_xy.astype(np.float32), (fit.height / d).astype(np.float32),
                         strength=normal_strength)
     stored = {"normal": cv.encode_normals(normal).astype(np.float32),
               "diffuse": cv.albedo_to_stored(diffuse).astype(np.float32),
@@ -392,13 +389,20 @@ def estimate(image, geo=None, normal_strength=None, with_fit=False, metals=None)
     return (stored, found, fitted) if with_fit else (stored, found)
 
 
+def network_input(image):
+    """The estimate as a refining network takes it: (H, W, 10) stored maps stacked in
+    :data:`svbrdf_cli.conventions.MAP_NAMES` order (normal 3, diffuse 3, roughness 1, specular 3)."""
+    stored, _ = estimate(image)
+    return np.concatenate([stored[k] for k in cv.MAP_NAMES], -1)
+
+
 class PhysicalModel:
     """``--model physical``: :func:`estimate` behind :class:`svbrdf_cli.inference.Chain`'s interface."""
 
     tier = "physical"
     stages = ()
 
-    def __init__(self, geometry=None, threads=0):
+    def __init__(self, geometry=None):
         self.geometry = geometry
         self.timings = {}
         self.found = {}

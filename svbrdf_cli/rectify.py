@@ -26,6 +26,7 @@ import logging
 
 import numpy as np
 
+from svbrdf_cli import conventions as cv
 from svbrdf_cli.errors import SvbrdfError
 
 log = logging.getLogger("svbrdf")
@@ -209,7 +210,7 @@ def _check_inside(quad, shape, what):
 # --------------------------------------------------------------------------
 
 def _luminance(image):
-    return image @ np.array([0.2126, 0.7152, 0.0722], np.float32)
+    return image @ np.asarray(cv.LUMA, np.float32)
 
 
 def find_highlight(image):

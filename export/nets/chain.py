@@ -87,11 +87,10 @@ PHYSICAL_CHANNELS = 10
 def physical_input(photo):
     """(B, 3, H, W) encoded photos -> (B, 10, H, W) physical estimates (:mod:`svbrdf_cli.physical`, numpy,
     no gradient), exactly what the runtime feeds an exported model's ``physical`` input."""
-    from svbrdf_cli.physical import estimate
+    from svbrdf_cli.physical import network_input
 
     arr = photo.detach().float().permute(0, 2, 3, 1).cpu().numpy()
-    est = [np.concatenate([estimate(a)[0][k] for k in cv.MAP_NAMES], -1) for a in arr]
-    return torch.from_numpy(np.stack(est)).permute(0, 3, 1, 2).to(photo)
+    return torch.from_numpy(np.stack([network_input(a) for a in arr])).permute(0, 3, 1, 2).to(photo)
 
 
 def refined_maps(physical, correction):

@@ -31,8 +31,11 @@ def test_physical_beats_the_floor_on_des19_and_the_card(shared_data):
 def test_physical_keeps_the_colour_of_the_real_photos(shared_data):
     from export import stability as S
 
+    from svbrdf_cli.capture import network_input
+
     real = S.real_crops(shared_data / "real", S.REAL_PHOTOS)
-    rows = colour.evaluate([M.Physical()], real, log=lambda *a: None)["physical"]
+    inputs = [(name, network_input(lin)) for name, lin in real]
+    rows = colour.evaluate([M.Physical()], inputs, log=lambda *a: None)["physical"]
     assert len(rows) == S.REAL_PHOTOS
     assert all(r["ok"] is not False for r in rows), [r for r in rows if r["ok"] is False]
 
