@@ -24,7 +24,7 @@ baseline, each installed tier, ``--model auto``) it measures, in one run:
   capture`` does it, without file input/output).
 
 It scores colour fidelity on the real photos (:mod:`export.colour`: the diffuse map's hue and
-saturation against the photo's, highlight excluded). It then runs the auto evidence (:func:`export.auto.evidence`: the shipped
+saturation against the photo's, highlight excluded). It then runs the auto evidence (:func:`export.auto_calibration.evidence`: the shipped
 rule against each tier on Des19, ``card_blue_9lights`` and the real photos,
 with time per photo measured on those photos; then auto's calibration again,
 to show it reproduces the shipped rule), the stability suite
@@ -44,14 +44,15 @@ import click
 import numpy as np
 import torch
 
-from export import methods as M
-from export.auto import CALIBRATION_SAMPLES, calibrate, calibration_table, generated
-from export.auto import evidence as auto_evidence, evidence_table as auto_table
+from export import methods as method_zoo
+from export.auto_calibration import CALIBRATION_SAMPLES, calibrate, calibration_table, generated
+from export.auto_calibration import evidence as auto_evidence, evidence_table as auto_table
 from export.evaluate import fit_intensity, load_des19, relight_rmse, score, score_predictions
-from export.files import shared_root
+from export.files import command_errors, shared_root
 from export.render.brdf import render_maps
 from svbrdf_cli import conventions as cv
-from svbrdf_cli.bench import median_seconds
+from svbrdf_cli.capture_speed import median_seconds
+from svbrdf_cli.errors import SvbrdfError
 from svbrdf_cli.mapset import read_map_set, read_stored_maps, stored_to_linear
 
 MAPS = cv.MAP_NAMES
@@ -99,7 +100,7 @@ class NineLights:
 
     def network_input(self):
         """Photo 00 as the tool feeds it to the networks (auto exposure)."""
-        from svbrdf_cli.capture import network_input
+        from svbrdf_cli.pipeline import network_input
 
         return network_input(cv.image_to_linear(self.photos[0]))
 
@@ -130,7 +131,7 @@ class NineLights:
 
 def timings(method, repeat=5, big=2048, seed=0):
     """Seconds per image: the method at 256², and a ``big``² crop through the capture path to ``big``² maps."""
-    from svbrdf_cli.capture import NETWORK_SIZE, auto_exposure_gain, network_input, resize, upsample_maps
+    from svbrdf_cli.pipeline import NETWORK_SIZE, auto_exposure_gain, network_input, resize, upsample_maps
     from svbrdf_cli.ingest import encode_for_network
 
     rng = np.random.default_rng(seed)
@@ -251,12 +252,11 @@ def confidence_table(ev):
 
 def run(limit=None, repeat=5, figures="docs/figures", tables="docs/tables", stability=True, log=print, threads=0):
     """The whole benchmark; returns its results (also written as ``benchmark.json`` beside the figures)."""
-    from export import stability as S
-
+    from export import stability as stability_suite
     root = shared_root() / "data"
     des19 = str(root / "validation" / "des19")
     if not os.path.isdir(des19):
-        raise click.ClickException(f"{des19}: Des19 validation samples not found (set SVBRDF_SHARED)")
+        raise SvbrdfError(f"{des19}: Des19 validation samples not found (set SVBRDF_SHARED)")
     samples = load_des19(des19)[:limit] if limit else load_des19(des19)
     if limit:  # the reference scorer reads a whole folder: give it one with just these samples
         sub = tempfile.mkdtemp(prefix="svbrdf-des19-")
@@ -267,7 +267,7 @@ def run(limit=None, repeat=5, figures="docs/figures", tables="docs/tables", stab
         if os.path.isdir(root / "real" / "card_blue_9lights") else None
     work = tempfile.mkdtemp(prefix="svbrdf-bench-")
     rows, per_sample = [], {}
-    methods = M.available(threads)
+    methods = method_zoo.available(threads)
     nine_input = nine.network_input() if nine else None
     for method in methods:
         r = {"name": method.name, "label": method.label}
@@ -278,7 +278,7 @@ def run(limit=None, repeat=5, figures="docs/figures", tables="docs/tables", stab
         r.update(timings(method, repeat))
         rows.append(r)
         log(f"{method.name:6s} " + "  ".join(f"{k}={v:.4f}" for k, v in r.items() if isinstance(v, float)))
-    paper = {"name": "paper", "label": "paper (Des19 published outputs)", "s_256": M.PAPER_GPU_SECONDS}
+    paper = {"name": "paper", "label": "paper (Des19 published outputs)", "s_256": method_zoo.PAPER_GPU_SECONDS}
     paper.update({k if k in MAPS else "des19_relight": v for k, v in paper_accuracy(samples, des19).items()})
     rows.append(paper)
     if nine:
@@ -287,8 +287,8 @@ def run(limit=None, repeat=5, figures="docs/figures", tables="docs/tables", stab
     log("paper  " + "  ".join(f"{k}={v:.4f}" for k, v in paper.items() if isinstance(v, float)))
     results = {"methods": rows, "samples": len(samples), "repeat": repeat, "cores": os.cpu_count()}
 
-    from svbrdf_cli.capture import network_input
-    from svbrdf_cli.inference import DEFAULT_MODEL
+    from svbrdf_cli.pipeline import network_input
+    from svbrdf_cli.models import DEFAULT_MODEL
 
     by_name = {m.name: m for m in methods}  # the sessions loaded above serve every part below
     tier = DEFAULT_MODEL  # what svbrdf capture runs unless told otherwise
@@ -297,7 +297,7 @@ def run(limit=None, repeat=5, figures="docs/figures", tables="docs/tables", stab
     # roughness and specular are constants) that says nothing, so the evidence is the fast chain's.
     conf_tier = tier if tier != "physical" or "fast" not in by_name else "fast"
     results["confidence"] = {"tier": conf_tier, "maps": confidence_evidence(by_name[conf_tier].chain, samples)}
-    real = S.real_crops(root / "real", limit or S.REAL_PHOTOS) if os.path.isdir(root / "real") else []
+    real = stability_suite.real_crops(root / "real", limit or stability_suite.REAL_PHOTOS) if os.path.isdir(root / "real") else []
     real_inputs = [(name, network_input(lin)) for name, lin in real]  # once, for colour and auto
     from export import colour
 
@@ -307,7 +307,7 @@ def run(limit=None, repeat=5, figures="docs/figures", tables="docs/tables", stab
         tiers = {t: by_name[t].chain for t in rule["ladder"]}
         results["auto"] = {"rule": rule, "sets": auto_evidence(rule, samples, nine, [x for _, x in real_inputs],
                                                                chains=tiers, log=log)}
-        # The shipped rule's calibration, run again (python -m export.auto, without writing the rule).
+        # The shipped rule's calibration, run again (python -m export.auto_calibration, without writing the rule).
         fresh = calibrate(generated(8 if limit else CALIBRATION_SAMPLES), chains=tiers, repeat=repeat, log=log)
         results["auto"]["recalibrated"] = {"rule": fresh, "same_steps_as_shipped": fresh["steps"] == rule["steps"]}
     os.makedirs(figures, exist_ok=True)
@@ -320,11 +320,11 @@ def run(limit=None, repeat=5, figures="docs/figures", tables="docs/tables", stab
         text["auto.md"] = (auto_table(results["auto"]["sets"], rule["ladder"]) + "\n" + calibration_table(again["rule"])
                            + "\nThis calibration, run again by the benchmark, "
                            + ("gives the shipped rule's steps.\n" if again["same_steps_as_shipped"]
-                              else "does NOT give the shipped rule's steps: re-run python -m export.auto.\n"))
+                              else "does NOT give the shipped rule's steps: re-run python -m export.auto_calibration.\n"))
     if stability:
-        results["stability"] = S.run(chain, samples, des19, real,
+        results["stability"] = stability_suite.run(chain, samples, des19, real,
                                      gallery=os.path.join(figures, "stability_gallery.png"), log=log)
-        text["stability.md"] = S.table(results["stability"])
+        text["stability.md"] = stability_suite.table(results["stability"])
     for name, t in text.items():
         with open(os.path.join(tables, name), "w") as f:
             f.write(t)
@@ -345,7 +345,8 @@ def run(limit=None, repeat=5, figures="docs/figures", tables="docs/tables", stab
 def cli(limit, repeat, figures, tables, no_stability, threads):
     """Speed against accuracy, the stability suite and the confidence evidence, in one run."""
     torch.set_num_threads(max(1, os.cpu_count() or 1))
-    run(limit, repeat, figures, tables, not no_stability, log=click.echo, threads=threads)
+    with command_errors():
+        run(limit, repeat, figures, tables, not no_stability, log=click.echo, threads=threads)
 
 
 if __name__ == "__main__":

@@ -77,7 +77,7 @@ def fidelity(photo, diffuse):
 
 def evaluate(methods, inputs, log=print):
     """{method: [fidelity row per photo]} for ``inputs`` = [(name, network input)] (the real photos
-    cropped and exposed as ``svbrdf capture`` does: :func:`svbrdf_cli.capture.network_input`)."""
+    cropped and exposed as ``svbrdf capture`` does: :func:`svbrdf_cli.pipeline.network_input`)."""
     out = {}
     for m in methods:
         rows = []
@@ -114,14 +114,14 @@ def table(results):
 @click.option("--tables", default="docs/tables", show_default=True, type=click.Path(file_okay=False))
 def cli(tables):
     """Colour fidelity of every runnable method on the benchmark's real photos."""
-    from export import methods as M
-    from export import stability as S
+    from export import methods as method_zoo
+    from export import stability
     from export.files import shared_root
 
-    from svbrdf_cli.capture import network_input
+    from svbrdf_cli.pipeline import network_input
 
-    real = S.real_crops(shared_root() / "data" / "real", S.REAL_PHOTOS)
-    res = evaluate(M.available(), [(name, network_input(lin)) for name, lin in real], log=click.echo)
+    real = stability.real_crops(shared_root() / "data" / "real", stability.REAL_PHOTOS)
+    res = evaluate(method_zoo.available(), [(name, network_input(lin)) for name, lin in real], log=click.echo)
     os.makedirs(tables, exist_ok=True)
     text = table(res)
     with open(os.path.join(tables, "colour.md"), "w") as f:

@@ -34,10 +34,11 @@ import click
 import numpy as np
 import torch
 
-from export.files import shared_root
-from export.render import targets as T
+from export.files import command_errors, shared_root
+from export.render import targets
 from export.render.brdf import render, render_maps
 from svbrdf_cli import conventions as cv
+from svbrdf_cli.errors import SvbrdfError
 from svbrdf_cli.imageio import read_image
 from svbrdf_cli.mapset import read_map_set, write_map_set
 
@@ -69,8 +70,8 @@ def load_des19(folder):
 def ground_truth_intermediates(photo, maps):
     """Masks and aux renderings from GT maps, exposed like the input (see module doc)."""
     m = {k: v[None] for k, v in maps.items()}
-    intensity = T.auto_exposure(m, target=float(photo.mean()))
-    return {k: v[0] for k, v in T.intermediate_targets(m, intensity=intensity,
+    intensity = targets.auto_exposure(m, target=float(photo.mean()))
+    return {k: v[0] for k, v in targets.intermediate_targets(m, intensity=intensity,
                                                         names=("I_bf", "I_hr", "I_hr2", "M_b", "M_h")).items()}
 
 
@@ -178,7 +179,7 @@ def evaluate(run=None, des19=None, out=None, modes=MODES, log=print, onnx=None, 
     ``known_flash`` the one with :func:`known_flash_scale`."""
     des19 = des19 or str(shared_root() / "data" / "validation" / "des19")
     if not os.path.isdir(des19):
-        raise click.ClickException(f"{des19}: Des19 validation samples not found (set SVBRDF_SHARED)")
+        raise SvbrdfError(f"{des19}: Des19 validation samples not found (set SVBRDF_SHARED)")
     if onnx:
         from svbrdf_cli.inference import Chain
 
@@ -254,8 +255,9 @@ def cli(run, onnx, des19, out, json_out, threads, modes, record, oracle, known_f
     if unknown:
         raise click.BadParameter(f"unknown mode(s) {', '.join(sorted(unknown))}; choose from {', '.join(MODES)}",
                                  param_hint="--modes")
-    results = evaluate(run, des19, out, modes=modes, log=click.echo, onnx=onnx, oracle=oracle,
-                       known_flash=known_flash)
+    with command_errors():
+        results = evaluate(run, des19, out, modes=modes, log=click.echo, onnx=onnx, oracle=oracle,
+                           known_flash=known_flash)
     if json_out:
         with open(json_out, "w") as f:
             json.dump(results, f, indent=1)

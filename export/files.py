@@ -1,13 +1,15 @@
-"""Where the shared reference data is, and atomic file writes, for every export command."""
+"""Where the shared reference data is, atomic file writes, and error reporting, for every export command."""
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import os
 import tempfile
 from pathlib import Path
 
+from svbrdf_cli.errors import SvbrdfError
 from svbrdf_cli.imageio import umask
 
 
@@ -54,3 +56,15 @@ def read_json(path):
 
 def write_json(path, data):
     atomic_write(path, json.dumps(data, indent=1).encode())
+
+
+@contextlib.contextmanager
+def command_errors():
+    """For a ``python -m export...`` command: the library's :class:`SvbrdfError` as a one-line click error
+    (library functions never raise click's exceptions)."""
+    import click
+
+    try:
+        yield
+    except SvbrdfError as e:
+        raise click.ClickException(str(e)) from e

@@ -71,12 +71,12 @@ class Network:
 
 
 class Auto:
-    """``--model auto`` (:class:`svbrdf_cli.auto.AutoModel`) with the shipped rule."""
+    """``--model auto`` (:class:`svbrdf_cli.auto_tier.AutoModel`) with the shipped rule."""
 
     name, label = "auto", "auto (per photo, the cheapest tier the shipped rule finds good enough)"
 
     def __init__(self, rule, threads=0):
-        from svbrdf_cli.auto import AutoModel
+        from svbrdf_cli.auto_tier import AutoModel
 
         self.model = AutoModel(rule, threads=threads)
 
@@ -87,7 +87,7 @@ class Auto:
 
 def auto_rule():
     """The shipped ``--model auto`` rule, or None when it or a tier it needs is not installed."""
-    from svbrdf_cli.auto import load_rule
+    from svbrdf_cli.auto_tier import load_rule
     from svbrdf_cli.inference import ModelError
 
     try:

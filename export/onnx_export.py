@@ -2,12 +2,15 @@
 
     python -m export.onnx_export --run runs/fast --out svbrdf_cli/models/fast
 
-One file per stage, each a function of named tensors (NCHW float32, values
-in [0, 1]; maps in their stored encoding, see ``svbrdf_cli.conventions``):
+One file per stage of the run's variant, each a function of named tensors (NCHW
+float32, values in [0, 1]; maps in their stored encoding, see ``svbrdf_cli.conventions``):
 
 * ``masks.onnx``: photo -> M_b, M_h
 * ``aux.onnx``: photo, M_b, M_h -> I_bf, I_hr, I_hr2
 * ``maps.onnx``: photo, I_bf, I_hr, I_hr2 -> normal, diffuse, roughness, specular
+
+An end-to-end run (the ``lite`` tier, the e2e baseline) has the maps stage only: one
+``maps.onnx`` taking the photo. A refining run's maps stage also takes the physical estimate.
 
 Height and width are dynamic (multiples of :data:`SIZE_MULTIPLE`). Each
 model carries metadata: conventions version, tier, stage, input and output
@@ -26,6 +29,7 @@ from torch import nn
 
 from export.nets.chain import VARIANTS
 from svbrdf_cli import conventions as cv
+from svbrdf_cli.inference import PHYSICAL_INPUT
 from svbrdf_cli.physical import PHYSICAL_VERSION
 
 OPSET = 19
@@ -37,7 +41,7 @@ IO = {
 }
 
 
-class _Stage(nn.Module):
+class StageModule(nn.Module):
     """One stage of an :class:`SVBRDFNet` as a function of positional tensors."""
 
     def __init__(self, net, stage):
@@ -56,8 +60,8 @@ class _Stage(nn.Module):
         return tuple(out[k] for k in outs)
 
 
-#: The physical estimate's input (the runtime computes it: svbrdf_cli.inference.PHYSICAL_INPUT).
-PHYSICAL = "physical"
+#: The physical estimate's input name (the runtime computes the estimate and feeds it under this name).
+PHYSICAL = PHYSICAL_INPUT
 
 
 def stage_io(net, stage):
@@ -80,7 +84,7 @@ def export_stage(net, stage, path, size=256, metadata=None, weights="float32"):
     import onnx
 
     ins, outs = stage_io(net, stage)
-    module = _Stage(net.eval(), stage).eval()
+    module = StageModule(net.eval(), stage).eval()
     from export.nets.chain import PHYSICAL_CHANNELS
 
     dummy = tuple(torch.rand(1, PHYSICAL_CHANNELS if n == PHYSICAL else 3, size, size) for n in ins)

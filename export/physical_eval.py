@@ -60,14 +60,13 @@ def generated_photos(count=64, size=256, seed=2468):
     """(photos (N, H, W, 3) encoded, linear maps dict of (N, H, W, C)) from the training simulator."""
     import torch
 
-    from export.data import dataset as D
-
-    g = D.worker_generator(seed, 0, "cpu")
-    cfg = D.DataConfig(size=size, targets=())
+    from export.data import dataset
+    g = dataset.worker_generator(seed, 0, "cpu")
+    cfg = dataset.DataConfig(size=size, targets=())
     photos, maps = [], {k: [] for k in cv.MAP_NAMES}
     with torch.no_grad():
         for start in range(0, count, 16):
-            b = D.make_batch(g, min(16, count - start), cfg, seeds=D.SeedBank.find())
+            b = dataset.make_batch(g, min(16, count - start), cfg, seeds=dataset.SeedBank.find())
             photos.append(b["photo"].permute(0, 2, 3, 1).numpy())
             for k in cv.MAP_NAMES:
                 maps[k].append(b[k].permute(0, 2, 3, 1).numpy())

@@ -33,7 +33,7 @@ from export.evaluate import score
 from export.render.brdf import render_maps
 from svbrdf_cli import conventions as cv
 from svbrdf_cli import tta
-from svbrdf_cli.capture import network_input
+from svbrdf_cli.pipeline import network_input
 from svbrdf_cli.mapset import stored_to_linear, write_map_set
 
 MAPS = cv.MAP_NAMES
@@ -131,7 +131,7 @@ def real_photos(real_root, count=REAL_PHOTOS):
 def real_crops(real_root, count):
     """[(name, linear crop at network size)] of :func:`real_photos`, cropped as ``svbrdf capture`` does."""
     from svbrdf_cli import ingest, rectify
-    from svbrdf_cli.capture import NETWORK_SIZE, resize
+    from svbrdf_cli.pipeline import NETWORK_SIZE, resize
 
     out = []
     for path in real_photos(real_root, count):

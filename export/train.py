@@ -30,11 +30,12 @@ import time
 import click
 import torch
 
-from export import losses as L
-from export.data import dataset as D
-from export.files import atomic_torch_save, read_json, write_json
+from export import losses as loss_terms
+from export.data import dataset
+from export.files import atomic_torch_save, command_errors, read_json, write_json
 from export.nets.chain import ALL_TIERS, STAGES, VARIANTS, build, physical_input, refined_maps, tier_variant
 from svbrdf_cli import conventions as cv
+from svbrdf_cli.errors import SvbrdfError
 from svbrdf_cli.physical import PHYSICAL_VERSION
 
 #: Ground truth each stage needs from the data engine.
@@ -73,13 +74,13 @@ class StageTrainer:
         self.stage, self.out, self.cfg = stage, out, config
         self.device = torch.device(config.device)
         if stage not in VARIANTS[config.variant]:
-            raise click.ClickException(f"the {config.variant} variant has no '{stage}' stage "
-                                       f"(it trains {', '.join(VARIANTS[config.variant])})")
+            raise SvbrdfError(f"the {config.variant} variant has no '{stage}' stage "
+                              f"(it trains {', '.join(VARIANTS[config.variant])})")
         self.net = net if net is not None else build(config.tier, variant=config.variant,
                                                        refine=config.refine).to(self.device)
         self.bank = bank
-        self.data_cfg = D.DataConfig(size=config.size, targets=STAGE_TARGETS[stage])
-        self.gen = D.worker_generator(config.seed, STAGES.index(stage) + 1, "cpu")
+        self.data_cfg = dataset.DataConfig(size=config.size, targets=STAGE_TARGETS[stage])
+        self.gen = dataset.worker_generator(config.seed, STAGES.index(stage) + 1, "cpu")
         self.step = 0
         self.total = None
         self.elapsed = 0.0
@@ -105,7 +106,7 @@ class StageTrainer:
                 from export.nets.lite0 import Lite0Features
                 self.features = Lite0Features().to(self.device)
             if config.adversarial:
-                self.critics = torch.nn.ModuleDict({k: L.Critic() for k in ("I_bf", "I_hr", "I_hr2")}).to(self.device)
+                self.critics = torch.nn.ModuleDict({k: loss_terms.Critic() for k in ("I_bf", "I_hr", "I_hr2")}).to(self.device)
                 self.critic_opt = torch.optim.Adam(self.critics.parameters(), lr=LR, betas=BETAS)
         self.path = os.path.join(out, f"{stage}.pt")
 
@@ -116,7 +117,7 @@ class StageTrainer:
                 continue
             p = os.path.join(self.out, f"{s}.pt")
             if not os.path.exists(p):
-                raise click.ClickException(f"{p}: stage '{s}' must be trained before '{self.stage}'")
+                raise SvbrdfError(f"{p}: stage '{s}' must be trained before '{self.stage}'")
             ck = torch.load(p, map_location=self.device, weights_only=False)
             self.net.stage(s).load_state_dict(ck["weights"])
 
@@ -138,16 +139,16 @@ class StageTrainer:
             return False
         ck = torch.load(self.path, map_location=self.device, weights_only=False)
         if ck["config"]["tier"] != self.cfg.tier:
-            raise click.ClickException(f"{self.path}: was trained as tier {ck['config']['tier']!r}, not {self.cfg.tier!r}")
+            raise SvbrdfError(f"{self.path}: was trained as tier {ck['config']['tier']!r}, not {self.cfg.tier!r}")
         if self.cfg.refine and ck.get("physical_version") != PHYSICAL_VERSION:
-            raise click.ClickException(f"{self.path}: refines version {ck.get('physical_version')!r} of the physical "
-                                       f"estimate, not the current {PHYSICAL_VERSION!r}; start it again with --fresh")
+            raise SvbrdfError(f"{self.path}: refines version {ck.get('physical_version')!r} of the physical "
+                              f"estimate, not the current {PHYSICAL_VERSION!r}; start it again with --fresh")
         if ck["config"].get("refine", False) != self.cfg.refine:
-            raise click.ClickException(f"{self.path}: was trained with refine={ck['config'].get('refine', False)}, "
-                                       f"not {self.cfg.refine}")
+            raise SvbrdfError(f"{self.path}: was trained with refine={ck['config'].get('refine', False)}, "
+                              f"not {self.cfg.refine}")
         if ck["config"].get("variant", "chain") != self.cfg.variant:
-            raise click.ClickException(f"{self.path}: was trained as variant {ck['config'].get('variant', 'chain')!r}, "
-                                       f"not {self.cfg.variant!r}")
+            raise SvbrdfError(f"{self.path}: was trained as variant {ck['config'].get('variant', 'chain')!r}, "
+                              f"not {self.cfg.variant!r}")
         self.net.stage(self.stage).load_state_dict(ck["weights"])
         self.opt.load_state_dict(ck["optimizer"])
         self.step, self.total, self.elapsed = ck["step"], ck["total"], ck["elapsed"]
@@ -167,7 +168,7 @@ class StageTrainer:
         return scale * LR
 
     def batch(self, generator=None, n=None):
-        b = D.make_batch(generator or self.gen, n or self.cfg.batch, self.data_cfg, self.bank, device="cpu")
+        b = dataset.make_batch(generator or self.gen, n or self.cfg.batch, self.data_cfg, self.bank, device="cpu")
         if self.stage == "maps" and getattr(self.net, "refine", False):
             b["physical"] = physical_input(b["photo"])
         return {k: v.to(self.device) for k, v in b.items() if torch.is_tensor(v)}
@@ -176,7 +177,7 @@ class StageTrainer:
         net, photo = self.net, b["photo"]
         if self.stage == "masks":
             pred = net.run_masks(photo)
-            parts = {k: L.mask_loss(pred[k], b[k]) for k in ("M_b", "M_h")}
+            parts = {k: loss_terms.mask_loss(pred[k], b[k]) for k in ("M_b", "M_h")}
             return sum(parts.values()), parts, pred
         with torch.no_grad():
             masks = net.run_masks(photo)
@@ -185,7 +186,7 @@ class StageTrainer:
             total, parts = 0, {}
             for k in ("I_bf", "I_hr", "I_hr2"):
                 critic = self.critics[k] if (self.critics is not None and train) else None
-                t, p = L.aux_loss(pred[k], b[k], self.features, critic)
+                t, p = loss_terms.aux_loss(pred[k], b[k], self.features, critic)
                 total = total + t
                 parts.update({f"{k}_{n}": v for n, v in p.items()})
             return total, parts, pred
@@ -193,9 +194,9 @@ class StageTrainer:
             aux = net.run_aux(photo, masks)
         pred = net.run_maps(photo, {**aux, "physical": b.get("physical")})
         target = _stored_targets(b)
-        lights, cams = L.random_light_views(photo.shape[0], generator=self.gen if train else
+        lights, cams = loss_terms.random_light_views(photo.shape[0], generator=self.gen if train else
                                             torch.Generator().manual_seed(0), device=self.device)
-        total, parts = L.map_losses(pred, target, lights, cams)
+        total, parts = loss_terms.map_losses(pred, target, lights, cams)
         return total, parts, pred
 
     def train_step(self):
@@ -209,7 +210,7 @@ class StageTrainer:
         self.opt.step()
         if self.critics is not None:
             self.critic_opt.zero_grad()
-            closs = sum(L.critic_loss(self.critics[k], b[k], pred[k].detach()) for k in self.critics)
+            closs = sum(loss_terms.critic_loss(self.critics[k], b[k], pred[k].detach()) for k in self.critics)
             closs.backward()
             self.critic_opt.step()
             parts["critic"] = closs
@@ -222,7 +223,7 @@ class StageTrainer:
         module = self.net.stage(self.stage)
         module.eval()
         if self._val_batch is None:  # the same samples every time: make them once
-            self._val_batch = self.batch(D.worker_generator(VAL_SEED, VAL_STREAM), self.cfg.val_samples)
+            self._val_batch = self.batch(dataset.worker_generator(VAL_SEED, VAL_STREAM), self.cfg.val_samples)
         b = self._val_batch
         _, _, pred = self.losses(b, train=False)
         ref = _stored_targets(b) if self.stage == "maps" else b
@@ -234,8 +235,7 @@ class StageTrainer:
             elif self.stage == "aux":
                 base = b["photo"]                             # "the input is already it"
             elif k == "normal":
-                base = torch.full_like(ref[k], 0.5)
-                base[:, 2] = 1.0                              # flat normal
+                base = ref[k].new_tensor(cv.FLAT_NORMAL_ENCODED).view(1, 3, 1, 1).expand_as(ref[k])
             else:
                 base = ref[k].mean((0, 2, 3), keepdim=True).expand_as(ref[k])  # the set's mean value
             out[f"baseline_{k}"] = float(((base - ref[k]) ** 2).mean().sqrt())
@@ -263,7 +263,7 @@ def train_stage(stage, out, config, steps=None, minutes=None, resume=True, check
         if steps:
             t.total = int(steps)
         elif not minutes:
-            raise click.ClickException("give --steps or --minutes")
+            raise SvbrdfError("give --steps or --minutes")
     start = time.perf_counter()
     base_elapsed = t.elapsed
     bar = tqdm(total=t.total, initial=t.step, desc=stage, unit="step", disable=not progress, dynamic_ncols=True)
@@ -307,7 +307,7 @@ def record_provenance(out, trainer, val):
         "seconds": round(trainer.elapsed, 1), "samples_seen": trainer.step * cfg.batch,
         "losses": {"adversarial": cfg.adversarial, "perceptual": cfg.perceptual} if trainer.stage == "aux" else None,
         "validation": val, "final_loss": trainer.history[-1]["loss"] if trainer.history else None,
-        "data": {"generator": "export.data.dataset.make_batch", "config": D._config_dict(trainer.data_cfg),
+        "data": {"generator": "export.data.dataset.make_batch", "config": dataset.config_dict(trainer.data_cfg),
                  "cc0_seeds": trainer.bank.names if trainer.bank is not None else [],
                  "validation": f"{cfg.val_samples} samples, seed {VAL_SEED} stream {VAL_STREAM}"},
         "conventions": cv.CONVENTIONS_VERSION, "torch": torch.__version__,
@@ -368,16 +368,17 @@ def cli(stage, tier, out, steps, minutes, batch, size, device, seed, threads, fr
     except ValueError as e:
         raise click.BadParameter(str(e), param_hint="--variant") from None
     out = out or os.path.join("runs", tier if variant == tier_variant(tier) else f"{tier}-{variant}")
-    bank = D.SeedBank.find(shared)
+    bank = dataset.SeedBank.find(shared)
     cfg = RunConfig(tier=tier, size=size, batch=batch, seed=seed, device=device, adversarial=not no_adversarial,
                     variant=variant, refine=refine)
     stages = VARIANTS[variant] if stage == "all" else (stage,)
     for s in stages:
         share = ALL_SPLIT[s] / sum(ALL_SPLIT[x] for x in stages) if stage == "all" else 1.0
-        train_stage(s, out, cfg, steps=math.ceil(steps * share) if steps else None,
-                    minutes=minutes * share if minutes else None, resume=not fresh,
-                    checkpoint_every=checkpoint_every, val_every=val_every, bank=bank,
-                    log=click.echo)
+        with command_errors():
+            train_stage(s, out, cfg, steps=math.ceil(steps * share) if steps else None,
+                        minutes=minutes * share if minutes else None, resume=not fresh,
+                        checkpoint_every=checkpoint_every, val_every=val_every, bank=bank,
+                        log=click.echo)
     click.echo(f"{out}: " + ", ".join(f"{s}.pt" for s in stages) + ", provenance.json")
 
 

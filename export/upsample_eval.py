@@ -5,7 +5,7 @@
 
 Ground-truth maps at ``--size`` are rendered into a flash photo with the
 runtime's renderer. Two low-resolution sources are upsampled back to
-``--size`` with each method of :func:`svbrdf_cli.capture.upsample_maps`:
+``--size`` with each method of :func:`svbrdf_cli.pipeline.upsample_maps`:
 
 * **ideal**: the ground truth area-downsampled to 256 (a perfect network),
   so only the upsampling is measured;
@@ -23,7 +23,7 @@ import time
 import click
 import numpy as np
 
-from svbrdf_cli import capture as C
+from svbrdf_cli import pipeline
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.mapset import linear_to_stored
 from svbrdf_cli.shading import render_maps
@@ -61,7 +61,8 @@ def cli(size, model, shared, limit):
     """Measure guided against bicubic upsampling of maps from 256 px."""
     chain = None
     if model:
-        from svbrdf_cli.inference import Chain, model_folder
+        from svbrdf_cli.inference import Chain
+        from svbrdf_cli.models import model_folder
 
         chain = Chain(model_folder(model))
     sources = ("ideal", "network") if chain else ("ideal",)
@@ -74,12 +75,12 @@ def cli(size, model, shared, limit):
         names.append(name)
         maps = {k: np.asarray(maps[k], np.float64) for k in cv.MAP_NAMES}
         lin = render_maps(maps, light=cv.FLASH_POSITION)
-        gain = 2.0 ** C.auto_exposure_gain(C.resize(lin.astype(np.float32), C.NETWORK_SIZE))
+        gain = 2.0 ** pipeline.auto_exposure_gain(pipeline.resize(lin.astype(np.float32), pipeline.NETWORK_SIZE))
         high = cv.image_to_encoded(lin * gain).astype(np.float32)
-        low = C.resize(high, C.NETWORK_SIZE)
+        low = pipeline.resize(high, pipeline.NETWORK_SIZE)
         gt = {k: v.astype(np.float32) for k, v in linear_to_stored(maps).items()}
         gt["roughness"] = gt["roughness"][..., :1]
-        gt_low = {k: C.resize(v, C.NETWORK_SIZE) for k, v in gt.items()}
+        gt_low = {k: pipeline.resize(v, pipeline.NETWORK_SIZE) for k, v in gt.items()}
         lows = {"ideal": gt_low}
         if chain:
             out = chain(low)
@@ -89,7 +90,7 @@ def cli(size, model, shared, limit):
                 err[(s, "at 256", k)].append(_rmse(src[k], gt_low[k]))
             for m in METHODS:
                 t0 = time.perf_counter()
-                up = C.upsample_maps(src, low, high, m)
+                up = pipeline.upsample_maps(src, low, high, m)
                 secs[m].append(time.perf_counter() - t0)
                 for k in cv.MAP_NAMES:
                     err[(s, m, k)].append(_rmse(up[k], gt[k]))

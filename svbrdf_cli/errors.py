@@ -18,3 +18,7 @@ class ImageWriteError(SvbrdfError):
 
 class MapSetError(SvbrdfError):
     """A folder does not hold a complete, consistent SVBRDF map set."""
+
+
+class OutputExistsError(SvbrdfError):
+    """The output already exists and replacing it was not asked for (``--force``)."""

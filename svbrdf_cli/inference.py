@@ -1,7 +1,8 @@
 """The three-stage inference chain on onnxruntime (no torch).
 
-A model folder holds ``masks.onnx``, ``aux.onnx`` and ``maps.onnx`` as
-written by ``python -m export.onnx_export``; each declares its inputs,
+A model folder holds ``masks.onnx``, ``aux.onnx`` and ``maps.onnx`` (a chain)
+or ``maps.onnx`` alone (an end-to-end network such as ``lite``), as written by
+``python -m export.onnx_export``; each declares its inputs,
 outputs, size multiple and conventions version in its metadata, and
 :class:`Chain` checks them when it loads.
 
@@ -26,13 +27,6 @@ STAGES = ("masks", "aux", "maps")
 MODELS_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "models")
 #: Tiers, cheapest first: ``lite`` is one end-to-end UNet (maps.onnx only), the others the three-stage chain.
 TIERS = ("lite", "fast", "balanced", "best")
-#: ``--model physical``: the maps computed from the flash physics alone (:mod:`svbrdf_cli.physical`).
-PHYSICAL = "physical"
-#: What ``svbrdf capture`` runs without ``--model``: the physical estimate, until a trained
-#: model beats it on Des19 (every map) and on the real 9-light card (docs/benchmarks.md).
-DEFAULT_MODEL = PHYSICAL
-#: ``--model auto``: per photo, the cheapest installed tier good enough for it (:mod:`svbrdf_cli.auto`).
-AUTO = "auto"
 #: The extra network input of models that refine the physical estimate: its four stored maps
 #: stacked as 10 channels (normal 3, diffuse 3, roughness 1, specular 3).
 PHYSICAL_INPUT = "physical"
@@ -62,44 +56,6 @@ def model_stages(folder):
 def installed_tiers():
     """Tiers whose models are in :data:`MODELS_DIR`, cheapest first."""
     return [t for t in TIERS if model_stages(os.path.join(MODELS_DIR, t))]
-
-
-def model_folder(model):
-    """``--model`` value (a tier name or a folder) -> the folder holding the three ONNX files."""
-    if model in TIERS:
-        if model not in installed_tiers():
-            have = ", ".join(installed_tiers()) or "none"
-            raise ModelError(f"The '{model}' model is not installed (installed: {have}); "
-                             f"use --model {installed_tiers()[0] if installed_tiers() else 'FOLDER'}.")
-        return os.path.join(MODELS_DIR, model)
-    if os.path.isdir(model):
-        return model
-    raise ModelError(f"--model '{model}' is neither a tier ({', '.join(TIERS)}), 'auto', "
-                     "nor a folder of exported models.")
-
-
-def load_model(model, threads=0):
-    """What ``--model`` names, ready to run: a :class:`Chain`, or for ``auto`` an
-    :class:`svbrdf_cli.auto.AutoModel` (same call interface)."""
-    if model == AUTO:
-        from svbrdf_cli.auto import AutoModel
-
-        return AutoModel(threads=threads)
-    if model == PHYSICAL:
-        from svbrdf_cli.physical import PhysicalModel
-
-        return PhysicalModel()
-    return Chain(model_folder(model), threads=threads)
-
-
-def check_model(model):
-    """Raise :class:`ModelError` now if ``model`` cannot be loaded (cheap: no session is made)."""
-    if model == AUTO:
-        from svbrdf_cli.auto import load_rule
-
-        load_rule()
-    elif model != PHYSICAL:
-        model_folder(model)
 
 
 class Chain:
@@ -149,7 +105,7 @@ class Chain:
 
     @property
     def used(self):
-        """The model that made the last outputs (for a chain, itself; see :class:`svbrdf_cli.auto.AutoModel`)."""
+        """The model that made the last outputs (for a chain, itself; see :class:`svbrdf_cli.auto_tier.AutoModel`)."""
         return self
 
     def describe(self):

@@ -9,8 +9,8 @@ as the camera meant it (EXIF orientation applied), whatever the file:
 * EXR and float TIFF: taken as linear.
 
 Grey images are repeated to three channels, alpha is dropped. The networks
-take :func:`network_input`: exposure-adjusted, clipped and encoded as
-training images are (``conventions.image_to_encoded``).
+take the photo exposed, clipped and encoded as training images are
+(:func:`encode_for_network`, through :func:`svbrdf_cli.pipeline.network_input`).
 """
 
 from __future__ import annotations
@@ -29,6 +29,8 @@ RAW_EXTENSIONS = frozenset(
 
 #: Largest image read, in pixels (a decompression bomb guard): 200 MP.
 MAX_PIXELS = 200_000_000
+#: Smallest side read, in pixels (the networks see 256 × 256; a smaller photo is upsampled).
+MIN_SIDE = 32
 
 
 @dataclasses.dataclass
@@ -66,11 +68,6 @@ def encode_for_network(linear):
     return cv.image_to_encoded(np.asarray(linear, np.float32)).astype(np.float32)
 
 
-def network_input(photo, exposure=0.0):
-    """Linear photo -> the encoded image the networks take, ``exposure`` in stops."""
-    return encode_for_network(photo.linear * np.float32(2.0 ** exposure))
-
-
 def _load_raw(path):
     import rawpy
 
@@ -100,9 +97,9 @@ def _load_image(path):
     if spec.width * spec.height > MAX_PIXELS:
         raise ImageReadError(f"Could not read '{path}': {spec.width}x{spec.height} is over "
                              f"{MAX_PIXELS // 1_000_000} MP. Downscale it first.")
-    if spec.width < 32 or spec.height < 32:
+    if spec.width < MIN_SIDE or spec.height < MIN_SIDE:
         raise ImageReadError(f"Could not use '{path}': {spec.width}x{spec.height} is too small; "
-                             "use a photo at least 256 pixels wide.")
+                             f"use a photo at least {MIN_SIDE} pixels on each side (256 or more for useful maps).")
     if not buf.read(force=True):
         why = (buf.geterror().strip().splitlines() or ["truncated data"])[0]
         raise ImageReadError(f"Could not decode '{path}': {why}. The file may be damaged; export it again.")

@@ -480,7 +480,7 @@ _NODE_WRANGLER_TAGS = frozenset(
     "emissive emit alpha opacity ao ambient occlusion".split())
 
 
-def _name_components(name):
+def name_components(name):
     """A file name split the way Node Wrangler splits it (lower-cased pieces)."""
     name = "".join(ch for ch in name if not ch.isdigit())
     name = re.sub(r"([a-z])([A-Z])", r"\1 \2", name)
@@ -491,7 +491,7 @@ def blender_prefix(folder):
     """File-name prefix for the Blender preset: the folder name, unless Node Wrangler would misread it."""
     raw = os.path.basename(os.path.abspath(os.fspath(folder)))
     prefix = re.sub(r"[^A-Za-z0-9-]+", "-", raw).strip("-")
-    if not prefix or set(_name_components(prefix)) & _NODE_WRANGLER_TAGS:
+    if not prefix or set(name_components(prefix)) & _NODE_WRANGLER_TAGS:
         if prefix:
             log.warning("Blender preset: '%s' holds a texture tag Node Wrangler matches; "
                         "naming the files material_*.", raw)

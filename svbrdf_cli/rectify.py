@@ -77,7 +77,11 @@ def tag_centres(cell=1.0):
     return {i: ((c + 0.5) * cell, (r + 0.5) * cell) for i, (c, r) in _tag_cells().items()}
 
 
-def marker_sheet(cell_px=96, label=True):
+#: Pixels per cell of a printed sheet: the default (a 1056 px sheet) and the range ``svbrdf markers`` takes.
+SHEET_CELL_PX, SHEET_CELL_PX_RANGE = 96, (24, 1000)
+
+
+def marker_sheet(cell_px=SHEET_CELL_PX, label=True):
     """The printable sheet: (S, S) uint8, white paper, black tags.
 
     ``cell_px`` pixels a cell: the default 96 gives a 1056 px sheet, 8.9 cm
@@ -268,7 +272,7 @@ def auto_crop(image):
 def marker_crop(image):
     """Rectify the window of a photographed :func:`marker_sheet`."""
     lum = _luminance(image)
-    gray = (np.clip(lum / max(np.percentile(lum, 99), 1e-6), 0, 1) ** (1 / 2.2) * 255).astype(np.uint8)
+    gray = (np.clip(lum / max(np.percentile(lum, 99), 1e-6), 0, 1) ** (1 / cv.IMAGE_GAMMA) * 255).astype(np.uint8)
     found = detect_markers(gray)
     try:
         hom = sheet_homography(found)

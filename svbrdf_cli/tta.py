@@ -90,11 +90,3 @@ def disagreement(results):
 def confidence(results, half=CONFIDENCE_HALF):
     """{map: (H, W) confidence in (0, 1]}: 1 where the passes agree, 0.5 at a disagreement of ``half``."""
     return {name: (1.0 / (1.0 + (d / half) ** 2)).astype(np.float32) for name, d in disagreement(results).items()}
-
-
-def mean_maps(results):
-    """The passes' average (normals averaged as vectors and renormalised)."""
-    out = {n: np.mean([r[n] for r in results], axis=0).astype(np.float32) for n in cv.MAP_NAMES}
-    vec = np.mean([cv.decode_normals(r["normal"]) for r in results], axis=0)
-    out["normal"] = cv.encode_normals(cv.normalize(vec)).astype(np.float32)
-    return out

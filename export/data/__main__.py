@@ -46,23 +46,23 @@ def throughput(batch, size, batches, device, threads, shared):
     from tqdm import tqdm
 
     torch = _setup(threads)
-    from export.data import dataset as D
-    from export.data import simulate as S
+    from export.data import dataset
+    from export.data import simulate
 
     bank = _bank(shared, device)
-    cfg = D.DataConfig(size=size)
+    cfg = dataset.DataConfig(size=size)
     stages = {
-        "materials (procedural + seeds + mixing + augmentation)": lambda g: D.materials(g, batch, cfg, bank, device),
-        "+ simulated photo and I": lambda g: S.photograph(D.materials(g, batch, cfg, bank, device),
-                                                          S.sample_capture(g, batch, cfg.capture), g),
-        "+ I_bf, M_b, M_h": lambda g: D.make_batch(g, batch, D.DataConfig(size=size, targets=("I_bf", "M_b", "M_h")),
+        "materials (procedural + seeds + mixing + augmentation)": lambda g: dataset.materials(g, batch, cfg, bank, device),
+        "+ simulated photo and I": lambda g: simulate.photograph(dataset.materials(g, batch, cfg, bank, device),
+                                                          simulate.sample_capture(g, batch, cfg.capture), g),
+        "+ I_bf, M_b, M_h": lambda g: dataset.make_batch(g, batch, dataset.DataConfig(size=size, targets=("I_bf", "M_b", "M_h")),
                                                     bank, device),
-        "full sample (+ I_hr, I_hr2)": lambda g: D.make_batch(g, batch, cfg, bank, device),
+        "full sample (+ I_hr, I_hr2)": lambda g: dataset.make_batch(g, batch, cfg, bank, device),
     }
     click.echo(f"device {device}, torch threads {torch.get_num_threads()}, batch {batch}, {size}²")
     rows = []
     for name, fn in stages.items():
-        g = D.worker_generator(0, 0, device)
+        g = dataset.worker_generator(0, 0, device)
         fn(g)  # warm-up
         if device.startswith("cuda"):
             torch.cuda.synchronize()
@@ -88,10 +88,10 @@ def throughput(batch, size, batches, device, threads, shared):
 def shards(out_dir, count, seed, shard_size, size, threads, shared):
     """Write a fixed, reproducible sample set (validation shards)."""
     _setup(threads)
-    from export.data import dataset as D
+    from export.data import dataset
     from export.files import shared_data
 
-    n = D.write_shards(out_dir, count, seed=seed, shard_size=shard_size, config=D.DataConfig(size=size),
+    n = dataset.write_shards(out_dir, count, seed=seed, shard_size=shard_size, config=dataset.DataConfig(size=size),
                        seeds_root=shared_data(shared))
     click.echo(f"{out_dir}: {n} shard(s), {count} samples")
 
@@ -123,20 +123,20 @@ def realism(count, seed, paper, shared, realism_args):
     from tqdm import tqdm
 
     _setup(0)
-    from export.data import dataset as D
-    from export.data import realism as R
-    from export.data import simulate as S
+    from export.data import dataset
+    from export.data import realism as realism_check
+    from export.data import simulate
 
     bank = _bank(shared)
-    cfg = D.DataConfig(targets=())
+    cfg = dataset.DataConfig(targets=())
     if paper:
-        cfg = dataclasses.replace(cfg, capture=S.PAPER)
-    g = D.worker_generator(seed, 0)
+        cfg = dataclasses.replace(cfg, capture=simulate.PAPER)
+    g = dataset.worker_generator(seed, 0)
     images = []
     for _ in tqdm(range(0, count, 16), desc="simulating", unit="batch"):
-        b = D.make_batch(g, min(16, count - len(images)), cfg, bank)
+        b = dataset.make_batch(g, min(16, count - len(images)), cfg, bank)
         images += list(b["photo"].permute(0, 2, 3, 1).numpy())
-    raise SystemExit(R.main(list(realism_args), simulated=images))
+    raise SystemExit(realism_check.main(list(realism_args), simulated=images))
 
 
 if __name__ == "__main__":

@@ -14,8 +14,8 @@ fraction are mixtures of two materials, and all get a colour jitter
 
 Two ways to deliver them:
 
-* :class:`FlashPhotos`, an ``IterableDataset`` making batches on the fly, on
-  CPU workers or directly on a GPU;
+* :func:`make_batch` with a :func:`worker_generator`: batches on the fly, on
+  the CPU or directly on a GPU (what training uses);
 * :func:`write_shards` / :class:`Shards`: fixed, reproducible sets on disk
   (8-bit, stored encoding) for validation.
 """
@@ -34,7 +34,7 @@ import torch.nn.functional as F
 
 from export.data import augment, procedural, simulate
 from export.files import atomic_write, read_json, shared_data, write_json
-from export.render import targets as T
+from export.render import targets as render_targets
 from svbrdf_cli import conventions as cv
 
 #: Ground-truth images besides ``I`` (which the simulator makes).
@@ -167,7 +167,7 @@ def make_batch(g, batch, config=DataConfig(), seeds=None, device=None, dtype=tor
     capture = simulate.sample_capture(g, batch, config.capture)
     shot = simulate.photograph(maps, capture, g)
     with torch.no_grad():
-        aux = T.intermediate_targets(maps, light=capture["light"].to(dtype), intensity=shot["intensity"],
+        aux = render_targets.intermediate_targets(maps, light=capture["light"].to(dtype), intensity=shot["intensity"],
                                      names=config.targets, camera=capture["camera"].to(dtype))
     out = {"photo": shot["photo"], "I": shot["I"], **aux}
     out.update({k: maps[k] for k in cv.MAP_NAMES})
@@ -181,30 +181,6 @@ def worker_generator(seed, stream, device="cpu"):
     g = torch.Generator(device=device)
     g.manual_seed((int(seed) * 1_000_003 + int(stream)) % (2 ** 63))
     return g
-
-
-class FlashPhotos(torch.utils.data.IterableDataset):
-    """Endless on-the-fly batches; use with ``DataLoader(ds, batch_size=None)``.
-
-    Each DataLoader worker draws from its own stream of ``seed``; on a GPU
-    use ``num_workers=0`` and ``device="cuda"``.
-    """
-
-    def __init__(self, batch, config=DataConfig(), seed=0, seeds_root=None, device="cpu"):
-        self.batch, self.config, self.seed, self.device = batch, config, seed, device
-        self.seeds_root = seeds_root
-        self._bank = None
-
-    def __iter__(self):
-        info = torch.utils.data.get_worker_info()
-        g = worker_generator(self.seed, 0 if info is None else info.id + 1, self.device)
-        if self._bank is None and self.seeds_root:
-            self._bank = SeedBank.find(self.seeds_root, device=self.device)
-        while True:
-            b = make_batch(g, self.batch, self.config, self._bank, self.device)
-            b.pop("capture")
-            b.pop("source")
-            yield b
 
 
 # --------------------------------------------------------------------------
@@ -240,7 +216,7 @@ def write_shards(out_dir, count, seed=0, shard_size=64, config=DataConfig(), see
 
     os.makedirs(out_dir, exist_ok=True)
     bank = SeedBank.find(seeds_root) if seeds_root else None
-    manifest = {"count": count, "seed": seed, "shard_size": shard_size, "config": _config_dict(config),
+    manifest = {"count": count, "seed": seed, "shard_size": shard_size, "config": config_dict(config),
                 "conventions": cv.CONVENTIONS_VERSION, "seeds": bank.names if bank else [],
                 "arrays": {k: "uint8 NCHW; maps in stored encoding" for k in SAMPLE_NAMES}}
     mpath = os.path.join(out_dir, "manifest.json")
@@ -264,7 +240,8 @@ def write_shards(out_dir, count, seed=0, shard_size=64, config=DataConfig(), see
     return n_shards
 
 
-def _config_dict(config):
+def config_dict(config):
+    """A :class:`DataConfig` as plain JSON values (tuples as lists), for manifests and provenance."""
     d = dataclasses.asdict(config)
     return json.loads(json.dumps(d, default=list))
 

@@ -15,7 +15,7 @@ import os
 import numpy as np
 import torch
 
-from export.data import dataset as D
+from export.data import dataset
 from export.data import procedural, simulate
 from svbrdf_cli import conventions as cv
 
@@ -73,7 +73,7 @@ def _bands(columns, rows, names, row_names, per_band=COLUMNS):
 
 def generated_columns(seed=0, bank=None, size=256):
     """One sample per family, then seed crops and mixtures; list of (name, tiles)."""
-    g = D.worker_generator(seed, 0)
+    g = dataset.worker_generator(seed, 0)
     cols = []
     for name in procedural.FAMILIES:
         m = procedural.generate(name, g, 1, size)
@@ -84,10 +84,10 @@ def generated_columns(seed=0, bank=None, size=256):
         cols.append((name, {k: v[0] for k, v in _tiles(batch).items()}))
     extra = []
     if bank is not None and len(bank):
-        cfg = D.DataConfig(size=size, seed_fraction=1.0, mix_fraction=0.0, targets=())
-        extra.append(("CC0 crop", D.make_batch(g, 2, cfg, bank)))
-    cfg = D.DataConfig(size=size, seed_fraction=0.2 if bank else 0.0, mix_fraction=1.0, targets=())
-    extra.append(("mixture", D.make_batch(g, 2, cfg, bank)))
+        cfg = dataset.DataConfig(size=size, seed_fraction=1.0, mix_fraction=0.0, targets=())
+        extra.append(("CC0 crop", dataset.make_batch(g, 2, cfg, bank)))
+    cfg = dataset.DataConfig(size=size, seed_fraction=0.2 if bank else 0.0, mix_fraction=1.0, targets=())
+    extra.append(("mixture", dataset.make_batch(g, 2, cfg, bank)))
     for label, b in extra:
         t = _tiles(b)
         for i in range(b["photo"].shape[0]):
@@ -125,7 +125,7 @@ def make_gallery(output, seed=0, shared=None):
     from export.files import shared_data
 
     root = shared_data(shared)
-    bank = D.SeedBank.find(root)
+    bank = dataset.SeedBank.find(root)
     cols = generated_columns(seed, bank)
     names = [n for n, _ in cols]
     sheet = _bands([c for _, c in cols], ROWS, names, ["photo", "clean I", "normal", "diffuse", "rough", "spec"])

@@ -449,4 +449,5 @@ def palette_pick(g, batch, palette, device, dtype=torch.float32, jitter=0.0):
 
 def luminance(rgb):
     """Rec. 709 luminance of linear RGB on dim 1, keepdim."""
-    return 0.2126 * rgb[:, :1] + 0.7152 * rgb[:, 1:2] + 0.0722 * rgb[:, 2:3]
+    r, g, b = cv.LUMA
+    return r * rgb[:, :1] + g * rgb[:, 1:2] + b * rgb[:, 2:3]

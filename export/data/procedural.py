@@ -33,7 +33,7 @@ from typing import Callable
 
 import torch
 
-from export.data import noise as N
+from export.data import noise as noise_fields
 from export.data.cc0 import DEFAULT_DEPTH
 from svbrdf_cli import conventions as cv
 
@@ -67,13 +67,13 @@ class _Ctx:
 
     def __init__(self, g, batch, size, device, dtype):
         self.g, self.b, self.size, self.dev, self.dt = g, batch, size, device, dtype
-        self.x, self.y = N.coords(size, device, dtype)
+        self.x, self.y = noise_fields.coords(size, device, dtype)
 
     def p(self, lo, hi, log=False):
-        return N.param(self.g, self.b, lo, hi, self.dev, self.dt, log=log)
+        return noise_fields.param(self.g, self.b, lo, hi, self.dev, self.dt, log=log)
 
     def flag(self, prob):
-        return N.chance(self.g, self.b, prob, self.dev, self.dt)
+        return noise_fields.chance(self.g, self.b, prob, self.dev, self.dt)
 
     def rot(self, max_angle=PI, snap=None, jitter=0.0, x=None, y=None):
         x = self.x if x is None else x
@@ -83,22 +83,22 @@ class _Ctx:
             a = torch.round(a / snap) * snap
         if jitter:
             a = a + self.p(-jitter, jitter)
-        return N.rotate(x, y, a)
+        return noise_fields.rotate(x, y, a)
 
     def noise(self, x, y, channels=1):
-        return N.value_noise(self.g, x, y, self.b, channels)
+        return noise_fields.value_noise(self.g, x, y, self.b, channels)
 
     def fbm(self, x, y, octaves=5, **kw):
-        return N.fbm(self.g, x, y, self.b, octaves, **kw)
+        return noise_fields.fbm(self.g, x, y, self.b, octaves, **kw)
 
     def worley(self, x, y, **kw):
-        return N.worley(self.g, x, y, self.b, **kw)
+        return noise_fields.worley(self.g, x, y, self.b, **kw)
 
     def hsv(self, hue, sat, val):
-        return N.random_hsv(self.g, self.b, self.dev, self.dt, hue, sat, val)
+        return noise_fields.random_hsv(self.g, self.b, self.dev, self.dt, hue, sat, val)
 
     def pick(self, palette, jitter=0.0):
-        return N.palette_pick(self.g, self.b, palette, self.dev, self.dt, jitter)
+        return noise_fields.palette_pick(self.g, self.b, palette, self.dev, self.dt, jitter)
 
     def spec(self, lo=0.03, hi=0.06):
         """Grey dielectric F0, (B, 3, 1, 1)."""
@@ -108,9 +108,9 @@ class _Ctx:
         """A random metal F0 per sample, (B, 3, 1, 1) linear, within [0.5, 0.98]."""
         names = list(names or METAL_F0)
         pal = torch.tensor([METAL_F0[n] for n in names], device=self.dev, dtype=self.dt)
-        idx = torch.floor(N.rand(self.g, (self.b,), self.dev, self.dt) * len(names)).long().clamp_max(len(names) - 1)
+        idx = torch.floor(noise_fields.rand(self.g, (self.b,), self.dev, self.dt) * len(names)).long().clamp_max(len(names) - 1)
         c = pal[idx].reshape(self.b, 3, 1, 1)
-        c = c * N.rand(self.g, (self.b, 1, 1, 1), self.dev, self.dt, 1.0 - jitter, 1.0 + jitter)
+        c = c * noise_fields.rand(self.g, (self.b, 1, 1, 1), self.dev, self.dt, 1.0 - jitter, 1.0 + jitter)
         return c.clamp(0.5, 0.98)
 
     def px(self, frac):
@@ -133,16 +133,16 @@ def _grime(c, height, diffuse, roughness, amount, sigma=0.02, colour=None, specu
     fraction of the map. Returns (diffuse, roughness) (and specular when given,
     pulled towards a dusty dielectric).
     """
-    cav = N.cavity(height, c.px(sigma))
+    cav = noise_fields.cavity(height, c.px(sigma))
     cav = cav / (cav.amax(dim=(2, 3), keepdim=True) + 1e-6)
-    blot = N.normalize01(c.fbm(c.x * c.p(2, 6), c.y * c.p(2, 6), 4))
+    blot = noise_fields.normalize01(c.fbm(c.x * c.p(2, 6), c.y * c.p(2, 6), 4))
     m = ((cav * 2.0).clamp(0, 1) * (0.4 + 0.8 * blot) + 0.25 * (blot - 0.6).clamp_min(0)).clamp(0, 1) * amount
     if colour is None:
         colour = c.hsv((0.05, 0.11), (0.25, 0.5), (0.12, 0.35))
-    diffuse = N.lerp(diffuse, colour, m)
-    roughness = N.lerp(roughness, torch.full_like(roughness, 0.95), m)
+    diffuse = noise_fields.lerp(diffuse, colour, m)
+    roughness = noise_fields.lerp(roughness, torch.full_like(roughness, 0.95), m)
     if specular is not None:
-        specular = N.lerp(specular, torch.full_like(specular, cv.DIELECTRIC_F0), m)
+        specular = noise_fields.lerp(specular, torch.full_like(specular, cv.DIELECTRIC_F0), m)
         return diffuse, roughness, specular
     return diffuse, roughness
 
@@ -157,14 +157,14 @@ def _scratches(c, layers=3, density=(4.0, 20.0), width=(0.7, 2.0), coverage=(0.2
     main = c.p(-PI, PI)
     for k in range(layers):
         a = c.p(-PI, PI) if random_dir else main + c.p(-0.15, 0.15)
-        x, y = N.rotate(c.x, c.y, a)
+        x, y = noise_fields.rotate(c.x, c.y, a)
         dens = c.p(density[0], density[1], log=True)
         along = c.p(0.2, 0.8)
         n = c.noise(x * along, y * dens)
         # |noise| grows about 1.2 * dens per surface unit away from a zero crossing.
         w = c.p(width[0], width[1]) * 1.2 * dens * (2.0 / c.size)
-        line = 1.0 - N.smoothstep(0.0, w, n.abs())
-        seg = N.smoothstep(0.0, 0.15, c.noise(x * c.p(1.0, 4.0), y * dens) + c.p(coverage[0], coverage[1]) - 0.6)
+        line = 1.0 - noise_fields.smoothstep(0.0, w, n.abs())
+        seg = noise_fields.smoothstep(0.0, 0.15, c.noise(x * c.p(1.0, 4.0), y * dens) + c.p(coverage[0], coverage[1]) - 0.6)
         total = torch.maximum(torch.as_tensor(total, device=c.dev, dtype=c.dt), line * seg * c.p(0.4, 1.0))
     return total
 
@@ -178,36 +178,36 @@ def tiles(g, batch, size, device, dtype=torch.float32):
     """Ceramic / stone tiles in a grid (stacked or offset) with grout."""
     c = _Ctx(g, batch, size, device, dtype)
     x, y = c.rot(PI, snap=PI / 2, jitter=0.05)
-    x, y = N.warp(g, x, y, batch, c.p(0.0, 0.004), 3.0)
+    x, y = noise_fields.warp(g, x, y, batch, c.p(0.0, 0.004), 3.0)
     cols = torch.round(c.p(2, 10))
     aspect = torch.where(c.flag(0.35) > 0, torch.round(c.p(2, 4)), torch.ones_like(cols))
     rows = cols * torch.where(c.flag(0.5) > 0, 1.0 / aspect, aspect)
     rows = rows.clamp(1, 24)
     offset = torch.where(c.flag(0.3) > 0, c.p(0.0, 0.5), torch.zeros_like(cols))
-    bk = N.bricks(g, x, y, batch, cols, rows, offset, channels=3)
+    bk = noise_fields.bricks(g, x, y, batch, cols, rows, offset, channels=3)
     grout_w = c.p(0.006, 0.03)
     bevel = c.p(0.005, 0.04)
     edge = bk["edge"] + 0.003 * c.fbm(x * 30, y * 30, 3)
-    inside = N.smoothstep(grout_w, grout_w + 0.002, edge)
-    bev = N.smoothstep(grout_w, grout_w + bevel, edge).sqrt()
+    inside = noise_fields.smoothstep(grout_w, grout_w + 0.002, edge)
+    bev = noise_fields.smoothstep(grout_w, grout_w + bevel, edge).sqrt()
     wav = c.fbm(x * c.p(1, 4), y * c.p(1, 4), 3)
     tile_h = 0.55 + 0.35 * bev + 0.03 * wav + 0.06 * (bk["value"][:, :1] - 0.5) * c.p(0, 1)
     grout_h = 0.15 + 0.05 * c.fbm(x * 60, y * 60, 3)
-    height = N.lerp(grout_h, tile_h, inside)
+    height = noise_fields.lerp(grout_h, tile_h, inside)
     # colours
     base = c.hsv((0.0, 1.0), (0.0, 0.7), (0.3, 0.95))
     alt = c.hsv((0.0, 1.0), (0.0, 0.7), (0.2, 0.95))
     two = (c.flag(0.3) * (bk["value"][:, 1:2] > 0.5).to(dtype))
-    colour = N.lerp(base, alt, two)
+    colour = noise_fields.lerp(base, alt, two)
     var = (bk["value"] - 0.5) * c.p(0.0, 0.4)
     mottle = c.fbm(x * c.p(3, 20), y * c.p(3, 20), 4, channels=1) * c.p(0.0, 0.15)
     tile_col = colour * torch.exp(var + mottle)
     grout_col = c.hsv((0.05, 0.12), (0.0, 0.25), (0.2, 0.8)) * torch.exp(0.15 * c.fbm(x * 50, y * 50, 2))
-    diffuse = N.lerp(grout_col, tile_col, inside)
+    diffuse = noise_fields.lerp(grout_col, tile_col, inside)
     glazed = c.flag(0.6)
     tile_r = torch.where(glazed > 0, c.p(0.05, 0.3), c.p(0.4, 0.8)) * torch.exp(0.15 * c.fbm(x * 8, y * 8, 3))
-    roughness = N.lerp(c.p(0.75, 1.0).expand_as(height), tile_r.expand_as(height), inside)
-    specular = N.lerp(c.spec(0.03, 0.05), torch.where(glazed > 0, c.spec(0.04, 0.07), c.spec(0.03, 0.05)), inside)
+    roughness = noise_fields.lerp(c.p(0.75, 1.0).expand_as(height), tile_r.expand_as(height), inside)
+    specular = noise_fields.lerp(c.spec(0.03, 0.05), torch.where(glazed > 0, c.spec(0.04, 0.07), c.spec(0.03, 0.05)), inside)
     diffuse, roughness, specular = _grime(c, height, diffuse, roughness, c.p(0, 0.8), 0.01, specular=specular)
     return _out(height, diffuse, roughness, specular, c.p(0.02, 0.08))
 
@@ -219,17 +219,17 @@ def bricks(g, batch, size, device, dtype=torch.float32):
     rows = c.p(4, 16)
     cols = rows / c.p(2.0, 3.5)
     offset = torch.where(c.flag(0.8) > 0, torch.full_like(rows, 0.5), c.p(0.2, 0.35))
-    bk = N.bricks(g, x, y, batch, cols, rows, offset, channels=4)
+    bk = noise_fields.bricks(g, x, y, batch, cols, rows, offset, channels=4)
     mort = c.p(0.008, 0.03)
     rough_edge = c.fbm(x * 25, y * 25, 4) * c.p(0.002, 0.008)
     edge = bk["edge"] + rough_edge
-    inside = N.smoothstep(mort, mort + 0.004, edge)
-    round_ = N.smoothstep(mort, mort + c.p(0.01, 0.03), edge)
+    inside = noise_fields.smoothstep(mort, mort + 0.004, edge)
+    round_ = noise_fields.smoothstep(mort, mort + c.p(0.01, 0.03), edge)
     surf = c.fbm(x * 40, y * 40, 4)
-    chips = N.smoothstep(0.4, 0.9, c.fbm(x * 12, y * 12, 4)) * c.p(0.0, 0.5)
+    chips = noise_fields.smoothstep(0.4, 0.9, c.fbm(x * 12, y * 12, 4)) * c.p(0.0, 0.5)
     brick_h = 0.55 + 0.3 * round_ + 0.04 * surf + 0.08 * (bk["value"][:, 3:4] - 0.5) - 0.25 * chips
     mortar_h = 0.2 + 0.06 * c.fbm(x * 80, y * 80, 3)
-    height = N.lerp(mortar_h, brick_h, inside)
+    height = noise_fields.lerp(mortar_h, brick_h, inside)
     base = c.hsv((-0.02, 0.09), (0.3, 0.8), (0.25, 0.75))
     yellow = c.hsv((0.08, 0.13), (0.2, 0.5), (0.45, 0.85))
     base = torch.where(c.flag(0.25) > 0, yellow, base)
@@ -237,8 +237,8 @@ def bricks(g, batch, size, device, dtype=torch.float32):
     speck = c.fbm(x * 60, y * 60, 3) * 0.12 + c.fbm(x * 6, y * 6, 3) * 0.1
     brick_col = base * torch.exp(var + speck)
     mortar_col = c.hsv((0.06, 0.13), (0.0, 0.2), (0.35, 0.8)) * torch.exp(0.15 * c.fbm(x * 90, y * 90, 2))
-    diffuse = N.lerp(mortar_col, brick_col, inside)
-    roughness = N.lerp(torch.full_like(height, 0.95), (c.p(0.7, 0.95) + 0.05 * surf), inside)
+    diffuse = noise_fields.lerp(mortar_col, brick_col, inside)
+    roughness = noise_fields.lerp(torch.full_like(height, 0.95), (c.p(0.7, 0.95) + 0.05 * surf), inside)
     diffuse, roughness = _grime(c, height, diffuse, roughness, c.p(0, 0.7), 0.015)
     return _out(height, diffuse, roughness, c.spec(0.03, 0.045), c.p(0.04, 0.12))
 
@@ -249,26 +249,26 @@ def cobblestones(g, batch, size, device, dtype=torch.float32):
     scale = c.p(1.5, 7, log=True)
     x, y = c.rot(PI)
     xs, ys = x * scale, y * scale
-    xs, ys = N.warp(g, xs, ys, batch, c.p(0.02, 0.12), 1.5)
+    xs, ys = noise_fields.warp(g, xs, ys, batch, c.p(0.02, 0.12), 1.5)
     w = c.worley(xs, ys, jitter=c.p(0.6, 1.0), channels=4)
     edge = (w["f2"] - w["f1"]) * 0.5 + 0.03 * c.fbm(xs * 6, ys * 6, 3)
     gap = c.p(0.02, 0.12)
     flat = c.flag(0.3)  # flagstones: flat tops
-    inside = N.smoothstep(gap, gap + 0.06, edge)
+    inside = noise_fields.smoothstep(gap, gap + 0.06, edge)
     dome_w = torch.where(flat > 0, c.p(0.05, 0.1), c.p(0.2, 0.5))
-    dome = N.smoothstep(gap, gap + dome_w, edge).sqrt()
+    dome = noise_fields.smoothstep(gap, gap + dome_w, edge).sqrt()
     surf = c.fbm(xs * 4, ys * 4, 4)
     stone_h = 0.35 + 0.5 * dome + 0.04 * surf + 0.1 * (w["value"][:, :1] - 0.5)
-    joint_h = 0.05 + 0.08 * N.normalize01(c.fbm(x * 80, y * 80, 3))
-    height = N.lerp(joint_h, stone_h, inside)
+    joint_h = 0.05 + 0.08 * noise_fields.normalize01(c.fbm(x * 80, y * 80, 3))
+    height = noise_fields.lerp(joint_h, stone_h, inside)
     base = c.hsv((0.03, 0.14), (0.0, 0.2), (0.25, 0.7))
     var = (w["value"][:, 1:4] - 0.5) * c.p(0.05, 0.3) + (w["value"][:, :1] - 0.5) * c.p(0.2, 0.8)
     stone_col = base * torch.exp(var + 0.15 * c.fbm(xs * 8, ys * 8, 4))
     joint_col = c.hsv((0.05, 0.15), (0.2, 0.5), (0.1, 0.45)) * torch.exp(0.3 * c.fbm(x * 100, y * 100, 2))
-    diffuse = N.lerp(joint_col, stone_col, inside)
+    diffuse = noise_fields.lerp(joint_col, stone_col, inside)
     wet = c.flag(0.15)
     stone_r = torch.where(wet > 0, c.p(0.15, 0.35), c.p(0.5, 0.85)) + 0.08 * surf - 0.15 * dome * c.p(0, 1)
-    roughness = N.lerp(torch.full_like(height, 0.95), stone_r, inside)
+    roughness = noise_fields.lerp(torch.full_like(height, 0.95), stone_r, inside)
     diffuse, roughness = _grime(c, height, diffuse, roughness, c.p(0.2, 0.9), 0.02)
     return _out(height, diffuse, roughness, c.spec(0.03, 0.05), c.p(0.05, 0.15))
 
@@ -280,7 +280,7 @@ def wood(g, batch, size, device, dtype=torch.float32):
     planks = c.flag(0.7)
     rows = torch.where(planks > 0, c.p(2, 9), torch.full_like(planks, 0.5))
     cols = torch.where(planks > 0, c.p(0.4, 2.0), torch.full_like(planks, 0.2))
-    bk = N.bricks(g, x, y, batch, cols, rows, c.p(0.2, 0.8), channels=5)
+    bk = noise_fields.bricks(g, x, y, batch, cols, rows, c.p(0.2, 0.8), channels=5)
     pv = bk["value"] * planks + 0.5 * (1 - planks)
     # Rings: distance from the log's axis, which runs along x, tilted a little
     # out of the board so the rings cut the surface in arches ("cathedrals").
@@ -293,23 +293,23 @@ def wood(g, batch, size, device, dtype=torch.float32):
     r = torch.sqrt(yy * yy + zz * zz) + wob
     t = torch.remainder(r, 1.0)
     late = t ** c.p(2.0, 6.0)
-    late = late * (1 - N.smoothstep(0.92, 1.0, t))
+    late = late * (1 - noise_fields.smoothstep(0.92, 1.0, t))
     fib = c.fbm(xw * c.p(1, 4), y * c.p(120, 300), 3)
-    pores = N.smoothstep(0.5, 1.4, c.fbm(xw * c.p(10, 30), y * c.p(150, 350), 2)) * c.p(0, 1)
+    pores = noise_fields.smoothstep(0.5, 1.4, c.fbm(xw * c.p(10, 30), y * c.p(150, 350), 2)) * c.p(0, 1)
     light = c.hsv((0.055, 0.11), (0.35, 0.7), (0.45, 0.9))
     dark_f = c.p(0.35, 0.75)
     tint = torch.exp((pv[:, 3:4] - 0.5) * c.p(0.0, 0.6) + (pv[:, 4:5] - 0.5) * 0.1 * torch.tensor([1.0, 0.0, -1.0], device=device, dtype=dtype).reshape(1, 3, 1, 1))
     diffuse = light * tint * torch.exp(torch.log(dark_f) * late + 0.12 * fib - 0.4 * pores)
     # Seams between planks.
     seam_w = c.p(0.002, 0.008)
-    seam = 1.0 - N.smoothstep(seam_w, seam_w + 0.004, bk["edge"]) * planks - (1 - planks)
+    seam = 1.0 - noise_fields.smoothstep(seam_w, seam_w + 0.004, bk["edge"]) * planks - (1 - planks)
     height = 0.6 - 0.1 * late + 0.03 * fib - 0.12 * pores + 0.05 * (pv[:, 4:5] - 0.5)
     height = height - 0.45 * seam
     varnish = c.flag(0.55)
     base_r = torch.where(varnish > 0, c.p(0.12, 0.35), c.p(0.5, 0.8))
     roughness = base_r + 0.05 * fib + 0.1 * late * (1 - varnish) + 0.3 * pores
-    roughness = N.lerp(roughness, torch.full_like(roughness, 0.9), seam)
-    diffuse = N.lerp(diffuse, diffuse * 0.3, seam)
+    roughness = noise_fields.lerp(roughness, torch.full_like(roughness, 0.9), seam)
+    diffuse = noise_fields.lerp(diffuse, diffuse * 0.3, seam)
     spec = torch.where(varnish > 0, c.spec(0.04, 0.06), c.spec(0.025, 0.04))
     diffuse, roughness = _grime(c, height, diffuse, roughness, c.p(0.0, 0.4), 0.01)
     return _out(height, diffuse, roughness, spec, c.p(0.005, 0.03))
@@ -348,11 +348,11 @@ def metal_plate(g, batch, size, device, dtype=torch.float32):
     x, y = c.rot(PI, snap=PI / 2, jitter=0.03)
     cols = torch.round(c.p(1, 4))
     rows = torch.round(c.p(1, 4))
-    bk = N.bricks(g, x, y, batch, cols, rows, c.flag(0.3) * 0.5, channels=3)
+    bk = noise_fields.bricks(g, x, y, batch, cols, rows, c.flag(0.3) * 0.5, channels=3)
     seam_w = c.p(0.003, 0.012)
     edge = bk["edge"]
-    inside = N.smoothstep(seam_w, seam_w + 0.004, edge)
-    bevel = N.smoothstep(seam_w, seam_w + c.p(0.01, 0.03), edge)
+    inside = noise_fields.smoothstep(seam_w, seam_w + 0.004, edge)
+    bevel = noise_fields.smoothstep(seam_w, seam_w + c.p(0.01, 0.03), edge)
     # Rivets: a row along each plate border, every ``pitch`` surface units.
     inset = c.p(0.04, 0.08)
     pitch = c.p(0.07, 0.2)
@@ -371,12 +371,12 @@ def metal_plate(g, batch, size, device, dtype=torch.float32):
     rivet = (1 - (rd / rad).clamp(0, 1) ** 2).clamp_min(0).sqrt() * has_rivets
     dent = c.fbm(x * c.p(2, 8), y * c.p(2, 8), 4) * c.p(0.0, 0.06)
     height = 0.3 + 0.3 * bevel + dent + 0.35 * rivet
-    height = N.lerp(torch.full_like(height, 0.05), height, inside)
+    height = noise_fields.lerp(torch.full_like(height, 0.05), height, inside)
     f0 = torch.where(c.flag(0.25) > 0, c.metal(), c.metal(_GREY_METALS))
     plate_var = (bk["value"] - 0.5) * 0.06
     smudge = c.fbm(x * c.p(1, 5), y * c.p(1, 5), 5)
-    wear = (1 - N.smoothstep(seam_w, seam_w + c.p(0.02, 0.08), edge)) * inside + rivet
-    wear = (wear * (0.6 + 0.4 * N.normalize01(c.fbm(x * 20, y * 20, 3)))).clamp(0, 1)
+    wear = (1 - noise_fields.smoothstep(seam_w, seam_w + c.p(0.02, 0.08), edge)) * inside + rivet
+    wear = (wear * (0.6 + 0.4 * noise_fields.normalize01(c.fbm(x * 20, y * 20, 3)))).clamp(0, 1)
     base_r = c.p(0.25, 0.6)
     roughness = base_r + 0.08 * smudge - 0.25 * wear * c.p(0.3, 1.0)
     specular = f0 * torch.exp(plate_var + 0.05 * smudge) * (1 + 0.12 * wear)
@@ -386,7 +386,7 @@ def metal_plate(g, batch, size, device, dtype=torch.float32):
     diffuse = torch.full_like(specular, 0.01) * (1 + 0.5 * smudge.clamp(-1, 1))
     # Grime in the seams raises roughness and dulls the specular (still metallic).
     cav = (1 - inside)
-    roughness = N.lerp(roughness, torch.full_like(roughness, 0.9), cav * c.p(0.3, 1.0))
+    roughness = noise_fields.lerp(roughness, torch.full_like(roughness, 0.9), cav * c.p(0.3, 1.0))
     specular = (specular * (1 - 0.25 * cav)).clamp(0.5, 0.98)
     return _out(height, diffuse, roughness, specular, c.p(0.01, 0.04))
 
@@ -406,23 +406,23 @@ def tread_plate(g, batch, size, device, dtype=torch.float32):
     b = torch.where(alt > 0, fu - fv, fu + fv) * 0.7071
     L, W = 0.42, 0.09
     loz = 1 - (torch.sqrt((a / L) ** 2 + (b / W) ** 2)).clamp(0, 1.5)
-    loz = N.smoothstep(0.0, 0.35, loz)
+    loz = noise_fields.smoothstep(0.0, 0.35, loz)
     dot_r = c.p(0.2, 0.35)
-    dots = N.smoothstep(0.0, 0.4, 1 - torch.sqrt(fu * fu + fv * fv) / dot_r)
+    dots = noise_fields.smoothstep(0.0, 0.4, 1 - torch.sqrt(fu * fu + fv * fv) / dot_r)
     sq = 1 - torch.maximum(fu.abs(), fv.abs()) / c.p(0.25, 0.4)
-    squares = N.smoothstep(0.0, 0.25, sq)
+    squares = noise_fields.smoothstep(0.0, 0.25, sq)
     bump = torch.where(kind < 1.5, loz, torch.where(kind < 2.4, dots, squares))
     base_dent = c.fbm(x * 3, y * 3, 4) * 0.03
     height = 0.2 + 0.7 * bump.sqrt() + base_dent
     f0 = c.metal(("steel", "aluminium", "iron", "zinc", "aluminium", "brass"))
     smudge = c.fbm(x * c.p(2, 6), y * c.p(2, 6), 5)
-    wear = N.smoothstep(0.5, 1.0, bump) * c.p(0.3, 1.0)
+    wear = noise_fields.smoothstep(0.5, 1.0, bump) * c.p(0.3, 1.0)
     roughness = c.p(0.3, 0.6) + 0.1 * smudge - 0.25 * wear
     specular = f0 * (1 + 0.1 * wear) * torch.exp(0.05 * smudge)
     scr = _scratches(c, layers=2, density=(3, 10)) * c.p(0.0, 1.0)
     roughness = roughness + 0.15 * scr
-    cav = (1 - bump) * N.smoothstep(0.3, 0.9, N.normalize01(c.fbm(x * 5, y * 5, 4))) * c.p(0.0, 0.7)
-    roughness = N.lerp(roughness, torch.full_like(roughness, 0.85), cav)
+    cav = (1 - bump) * noise_fields.smoothstep(0.3, 0.9, noise_fields.normalize01(c.fbm(x * 5, y * 5, 4))) * c.p(0.0, 0.7)
+    roughness = noise_fields.lerp(roughness, torch.full_like(roughness, 0.85), cav)
     specular = (specular * (1 - 0.3 * cav)).clamp(0.5, 0.98)
     diffuse = torch.full_like(specular, 0.01)
     return _out(height, diffuse, roughness, specular, c.p(0.02, 0.05))
@@ -434,7 +434,7 @@ def scratched_metal(g, batch, size, device, dtype=torch.float32):
     f0 = c.metal()
     x, y = c.x, c.y
     smudge = c.fbm(x * c.p(1, 5), y * c.p(1, 5), 5)
-    blotch = N.smoothstep(0.6, 1.6, c.fbm(x * c.p(2, 8), y * c.p(2, 8), 5)) * c.flag(0.5) * c.p(0.2, 0.7)
+    blotch = noise_fields.smoothstep(0.6, 1.6, c.fbm(x * c.p(2, 8), y * c.p(2, 8), 5)) * c.flag(0.5) * c.p(0.2, 0.7)
     scr = _scratches(c, layers=5, density=(4, 25), random_dir=True)
     hammered = c.flag(0.25)
     hw = c.worley(x * c.p(6, 20), y * c.p(6, 20), jitter=0.9)
@@ -455,17 +455,17 @@ def marble(g, batch, size, device, dtype=torch.float32):
     c = _Ctx(g, batch, size, device, dtype)
     x, y = c.rot(PI)
     f = c.p(0.5, 2.0)
-    wx, wy = N.warp(g, x * f, y * f, batch, c.p(0.1, 0.4), 1.0, 4)
+    wx, wy = noise_fields.warp(g, x * f, y * f, batch, c.p(0.1, 0.4), 1.0, 4)
     # Main veins: long wavy bands, sin of a noise-perturbed ramp.
     phase = wx * c.p(0.3, 1.0) + c.p(0.3, 1.0) * c.fbm(wx * 0.7, wy * 0.7, 4)
     sv = torch.sin(phase * PI).abs()
-    main = 1 - N.smoothstep(0.0, c.p(0.03, 0.12), sv)
-    main = main * N.smoothstep(-0.3, 0.6, c.fbm(wx * 1.5, wy * 1.5, 3))  # veins fade in and out
-    cloud = (1 - N.smoothstep(0.0, 0.8, sv)) * c.p(0.0, 0.4)
+    main = 1 - noise_fields.smoothstep(0.0, c.p(0.03, 0.12), sv)
+    main = main * noise_fields.smoothstep(-0.3, 0.6, c.fbm(wx * 1.5, wy * 1.5, 3))  # veins fade in and out
+    cloud = (1 - noise_fields.smoothstep(0.0, 0.8, sv)) * c.p(0.0, 0.4)
     # Thin veins: a crack network from ridged noise.
-    rn = N.normalize01(c.fbm(wx * 1.5 + 5.0, wy * 1.5, 4, mode="ridged", gain=0.6))
+    rn = noise_fields.normalize01(c.fbm(wx * 1.5 + 5.0, wy * 1.5, 4, mode="ridged", gain=0.6))
     t0 = c.p(0.86, 0.93)
-    thin = N.smoothstep(t0, t0 + 0.06, rn) * c.p(0.3, 0.9) * c.flag(0.8)
+    thin = noise_fields.smoothstep(t0, t0 + 0.06, rn) * c.p(0.3, 0.9) * c.flag(0.8)
     vein = torch.maximum(torch.maximum(main * c.p(0.6, 1.0), thin), cloud)
     palettes = [
         (0.92, 0.91, 0.88, 0.35, 0.35, 0.37),  # Carrara
@@ -479,16 +479,16 @@ def marble(g, batch, size, device, dtype=torch.float32):
     pair = c.pick(palettes, jitter=0.08)
     base, vcol = pair[:, :3], pair[:, 3:]
     mott = c.fbm(x * c.p(2, 8), y * c.p(2, 8), 5)
-    diffuse = N.lerp(base * torch.exp(0.1 * mott), vcol * torch.exp(0.1 * mott), vein)
+    diffuse = noise_fields.lerp(base * torch.exp(0.1 * mott), vcol * torch.exp(0.1 * mott), vein)
     slabs = c.flag(0.4)
-    bk = N.bricks(g, x, y, batch, torch.round(c.p(1, 4)), torch.round(c.p(1, 4)), 0.0, channels=1)
-    seam = (1 - N.smoothstep(0.002, 0.005, bk["edge"])) * slabs
+    bk = noise_fields.bricks(g, x, y, batch, torch.round(c.p(1, 4)), torch.round(c.p(1, 4)), 0.0, channels=1)
+    seam = (1 - noise_fields.smoothstep(0.002, 0.005, bk["edge"])) * slabs
     height = 0.8 + 0.02 * mott - 0.05 * vein * c.p(0, 1) - 0.7 * seam
     polished = c.flag(0.8)
     roughness = torch.where(polished > 0, c.p(0.05, 0.2), c.p(0.4, 0.7)) + 0.03 * mott + 0.1 * vein * c.p(0, 1)
     scr = _scratches(c, layers=2, density=(3, 10)) * c.p(0.0, 0.8) * polished
     roughness = roughness + 0.2 * scr + 0.6 * seam
-    diffuse = N.lerp(diffuse, diffuse * 0.4, seam)
+    diffuse = noise_fields.lerp(diffuse, diffuse * 0.4, seam)
     return _out(height, diffuse, roughness, c.spec(0.04, 0.06), c.p(0.003, 0.015))
 
 
@@ -504,13 +504,13 @@ def concrete(g, batch, size, device, dtype=torch.float32):
     # pores: small dark pits
     pw = c.worley(x * c.p(20, 60), y * c.p(20, 60), jitter=1.0, channels=1)
     pore_r = c.p(0.05, 0.25) * (pw["value"] < c.p(0.2, 0.7)).to(dtype)
-    pores = 1 - N.smoothstep(pore_r * 0.5, pore_r, pw["f1"])
+    pores = 1 - noise_fields.smoothstep(pore_r * 0.5, pore_r, pw["f1"])
     # aggregate / granite grains: per-cell colours
     ag = c.worley(x * c.p(25, 80), y * c.p(25, 80), jitter=1.0, channels=3)
     grain_col = torch.where(ag["value"][:, :1] < 0.5, 0.3 + 0.2 * ag["value"][:, 1:2], 1.2 + ag["value"][:, 1:2])
     granite = (kind >= 2).to(dtype)
     speck = (ag["value"][:, 2:3] < c.p(0.05, 0.3)).to(dtype) * (1 - granite)
-    cracks = N.smoothstep(0.88, 0.97, N.normalize01(c.fbm(x * c.p(1, 3), y * c.p(1, 3), 6, mode="ridged")))
+    cracks = noise_fields.smoothstep(0.88, 0.97, noise_fields.normalize01(c.fbm(x * c.p(1, 3), y * c.p(1, 3), 6, mode="ridged")))
     cracks = cracks * c.flag(0.4)
     diffuse = base * torch.exp(0.2 * large * c.p(0.3, 1.0) + 0.08 * mid + 0.05 * fine)
     diffuse = diffuse * (1 + granite * (grain_col - 1) * c.p(0.5, 1.0))
@@ -528,12 +528,12 @@ def leather(g, batch, size, device, dtype=torch.float32):
     c = _Ctx(g, batch, size, device, dtype)
     x, y = c.rot(PI)
     sc = c.p(8, 30, log=True)
-    xs, ys = N.warp(g, x * sc, y * sc, batch, c.p(0.1, 0.3), 0.7)
+    xs, ys = noise_fields.warp(g, x * sc, y * sc, batch, c.p(0.1, 0.3), 0.7)
     w = c.worley(xs, ys, jitter=1.0, channels=1)
-    crease = 1 - N.smoothstep(0.0, c.p(0.05, 0.2), w["f2"] - w["f1"])
+    crease = 1 - noise_fields.smoothstep(0.0, c.p(0.05, 0.2), w["f2"] - w["f1"])
     pebble = (1 - w["f1"] ** 2 * 0.8).clamp(0, 1)
     wr = c.fbm(x * c.p(2, 6), y * c.p(2, 6), 5, mode="ridged")
-    wrinkles = N.smoothstep(0.6, 0.95, N.normalize01(wr)) * c.p(0.0, 1.0)
+    wrinkles = noise_fields.smoothstep(0.6, 0.95, noise_fields.normalize01(wr)) * c.p(0.0, 1.0)
     height = 0.5 + 0.3 * pebble - 0.3 * crease - 0.4 * wrinkles + 0.05 * (w["value"] - 0.5)
     colour = c.hsv((0.0, 0.12), (0.3, 0.8), (0.08, 0.7))
     dyed = c.hsv((0.0, 1.0), (0.4, 0.9), (0.1, 0.6))
@@ -543,7 +543,7 @@ def leather(g, batch, size, device, dtype=torch.float32):
     diffuse = colour * torch.exp(0.15 * mott - c.p(0.2, 0.8) * crease - 0.5 * wrinkles + 0.1 * (w["value"] - 0.5))
     roughness = c.p(0.3, 0.7) + 0.02 * mott + 0.2 * crease + 0.15 * wrinkles - 0.1 * pebble * c.p(0, 1)
     # worn, polished highlights on the tops
-    wear = N.smoothstep(0.5, 1.2, c.fbm(x * 3, y * 3, 4)) * c.p(0.0, 1.0)
+    wear = noise_fields.smoothstep(0.5, 1.2, c.fbm(x * 3, y * 3, 4)) * c.p(0.0, 1.0)
     diffuse = diffuse * (1 + 0.4 * wear * pebble)
     roughness = roughness - 0.15 * wear * pebble
     return _out(height, diffuse, roughness, c.spec(0.035, 0.05), c.p(0.01, 0.035))
@@ -553,7 +553,7 @@ def fabric(g, batch, size, device, dtype=torch.float32):
     """Woven fabric: plain, twill or basket weave of round threads with fibres."""
     c = _Ctx(g, batch, size, device, dtype)
     x, y = c.rot(PI / 2, snap=PI / 2, jitter=0.05)
-    x, y = N.warp(g, x, y, batch, c.p(0.0, 0.01), 2.0)
+    x, y = noise_fields.warp(g, x, y, batch, c.p(0.0, 0.01), 2.0)
     n = c.p(8, 40, log=True)
     u, v = x * n, y * n
     iu, iv = torch.floor(u), torch.floor(v)
@@ -610,22 +610,22 @@ def plastic_paint(g, batch, size, device, dtype=torch.float32):
     specular = c.spec(0.035, 0.055).expand_as(diffuse)
     # Chipped paint over metal (or primer / wood under it).
     chipped = c.flag(0.35)
-    ch = N.normalize01(c.fbm(x * c.p(2, 8), y * c.p(2, 8), 6))
+    ch = noise_fields.normalize01(c.fbm(x * c.p(2, 8), y * c.p(2, 8), 6))
     thr = c.p(0.65, 0.85)
-    chip = N.smoothstep(thr, thr + 0.02, ch) * chipped
+    chip = noise_fields.smoothstep(thr, thr + 0.02, ch) * chipped
     under_metal = c.flag(0.5)
     under_d = torch.where(under_metal > 0, torch.full_like(colour, 0.01), c.hsv((0.05, 0.1), (0.2, 0.5), (0.2, 0.6)))
     under_s = torch.where(under_metal > 0, c.metal(_GREY_METALS), c.spec(0.03, 0.04))
     under_r = torch.where(under_metal > 0, c.p(0.3, 0.6), c.p(0.7, 0.9))
-    diffuse = N.lerp(diffuse, under_d, chip)
-    specular = N.lerp(specular, under_s.expand_as(specular), chip)
-    roughness = N.lerp(roughness, under_r + 0.1 * peel, chip)
+    diffuse = noise_fields.lerp(diffuse, under_d, chip)
+    specular = noise_fields.lerp(specular, under_s.expand_as(specular), chip)
+    roughness = noise_fields.lerp(roughness, under_r + 0.1 * peel, chip)
     height = height - 0.4 * chip
     diffuse, roughness, specular = _grime(c, height, diffuse, roughness, c.p(0.0, 0.8), 0.015, specular=specular)
     # Dust film over everything.
-    dust = c.p(0.0, 0.3) * N.normalize01(c.fbm(x * 4, y * 4, 4))
-    diffuse = N.lerp(diffuse, torch.full_like(diffuse, 0.35), dust * 0.5)
-    roughness = N.lerp(roughness, torch.full_like(roughness, 0.9), dust)
+    dust = c.p(0.0, 0.3) * noise_fields.normalize01(c.fbm(x * 4, y * 4, 4))
+    diffuse = noise_fields.lerp(diffuse, torch.full_like(diffuse, 0.35), dust * 0.5)
+    roughness = noise_fields.lerp(roughness, torch.full_like(roughness, 0.9), dust)
     return _out(height, diffuse, roughness, specular, c.p(0.003, 0.015))
 
 
@@ -634,15 +634,15 @@ def foam(g, batch, size, device, dtype=torch.float32):
     c = _Ctx(g, batch, size, device, dtype)
     x, y = c.x, c.y
     sc = c.p(10, 35, log=True)
-    xs, ys = N.warp(g, x * sc, y * sc, batch, c.p(0.05, 0.2), 0.5)
+    xs, ys = noise_fields.warp(g, x * sc, y * sc, batch, c.p(0.05, 0.2), 0.5)
     w1 = c.worley(xs, ys, jitter=1.0, channels=1)
     r1 = c.p(0.3, 0.55) * (0.7 + 0.6 * w1["value"])
     bowl = (1 - (w1["f1"] / r1).clamp(0, 1) ** 2)  # 1 at the pore centre, 0 at its rim
-    pore1 = N.smoothstep(0.0, 0.15, bowl)
+    pore1 = noise_fields.smoothstep(0.0, 0.15, bowl)
     w2 = c.worley(xs * 2.3 + 10, ys * 2.3, jitter=1.0, channels=1)
     r2 = 0.3 * (w2["value"] < 0.5).to(dtype)
     pore2 = (1 - (w2["f1"] / (r2 + 1e-3)).clamp(0, 1) ** 2) * (1 - pore1)
-    walls = N.smoothstep(0.0, 0.1, w1["f2"] - w1["f1"])
+    walls = noise_fields.smoothstep(0.0, 0.1, w1["f2"] - w1["f1"])
     height = 0.9 - 0.8 * bowl.sqrt() * pore1 - 0.35 * pore2 - 0.1 * (1 - walls) * (1 - pore1)
     height = height + 0.03 * c.fbm(x * 120, y * 120, 2)
     colour = c.hsv((0.0, 1.0), (0.0, 0.6), (0.35, 0.9))
@@ -660,11 +660,11 @@ def scales(g, batch, size, device, dtype=torch.float32):
     kind = c.p(0, 3)
     sc = c.p(2.0, 10.0, log=True)
     # -- hexagonal cells (reptile scales or hex tiles)
-    hx = N.hexagons(g, x, y, batch, sc, channels=3)
+    hx = noise_fields.hexagons(g, x, y, batch, sc, channels=3)
     gap = c.p(0.02, 0.08)
-    hinside = N.smoothstep(gap, gap + 0.03, hx["edge"])
-    dome = N.smoothstep(gap, 0.5, hx["edge"]).sqrt()
-    hex_h = N.lerp(torch.full_like(dome, 0.1), 0.4 + 0.5 * dome, hinside)
+    hinside = noise_fields.smoothstep(gap, gap + 0.03, hx["edge"])
+    dome = noise_fields.smoothstep(gap, 0.5, hx["edge"]).sqrt()
+    hex_h = noise_fields.lerp(torch.full_like(dome, 0.1), 0.4 + 0.5 * dome, hinside)
     # -- overlapping fish scales: rows of discs, each row over the one above it
     u, v = x * sc, y * sc * 2.0  # rows 0.5 units apart
     r0 = torch.floor(v)
@@ -690,8 +690,8 @@ def scales(g, batch, size, device, dtype=torch.float32):
     val = torch.where(fish, best_val, hx["value"][:, :1])
     base = c.hsv((0.0, 1.0), (0.1, 0.7), (0.1, 0.7))
     alt = c.hsv((0.0, 1.0), (0.1, 0.7), (0.1, 0.7))
-    colour = N.lerp(base, alt, (val * c.p(0.0, 1.0)))
-    rim = torch.where(fish, 1 - N.smoothstep(0.0, 0.25, best_in), 1 - N.smoothstep(gap, gap + 0.15, hx["edge"]))
+    colour = noise_fields.lerp(base, alt, (val * c.p(0.0, 1.0)))
+    rim = torch.where(fish, 1 - noise_fields.smoothstep(0.0, 0.25, best_in), 1 - noise_fields.smoothstep(gap, gap + 0.15, hx["edge"]))
     diffuse = colour * torch.exp(-c.p(0.0, 1.0) * rim + 0.1 * c.fbm(x * sc * 2, y * sc * 2, 3))
     hex_tile = kind < 1  # hex tiles with grout
     grout = c.hsv((0.05, 0.12), (0.0, 0.2), (0.3, 0.8))
@@ -720,7 +720,7 @@ def paper(g, batch, size, device, dtype=torch.float32):
     line_h = c.p(0.035, 0.1)
     rows = 2.0 / line_h
     word_cols = rows * c.p(0.3, 0.8)
-    bk = N.bricks(g, x, y, batch, word_cols, rows, c.p(0.2, 0.7), channels=2)
+    bk = noise_fields.bricks(g, x, y, batch, word_cols, rows, c.p(0.2, 0.7), channels=2)
     in_line = (bk["v"] > 0.3) & (bk["v"] < 0.8)
     word = (bk["value"][:, :1] > 0.2) & (bk["u"] > 0.08) & (bk["u"] < 0.92)
     letters = c.noise(x * rows * c.p(1.5, 3.0), y * 0.5) + 0.3 * c.noise(x * rows * 2, y * rows * 2)
@@ -729,7 +729,7 @@ def paper(g, batch, size, device, dtype=torch.float32):
     para = c.noise(x * 0.1, y * rows * 0.15) > -0.3
     text = (in_line & word & stroke & margin & para).to(dtype) * c.flag(0.5)
     # Printed pattern: stripes, dots or checks in a second colour.
-    pu, pv = N.rotate(x, y, c.p(-PI, PI))
+    pu, pv = noise_fields.rotate(x, y, c.p(-PI, PI))
     pf = c.p(3, 15)
     stripes = (torch.sin(pu * pf * PI) > c.p(-0.5, 0.5)).to(dtype)
     du, dv = torch.remainder(pu * pf, 1.0) - 0.5, torch.remainder(pv * pf, 1.0) - 0.5
@@ -740,13 +740,13 @@ def paper(g, batch, size, device, dtype=torch.float32):
     ink2 = c.hsv((0.0, 1.0), (0.3, 0.9), (0.2, 0.8))
     ink_amt = text + pattern * c.p(0.5, 1.0)
     ink_col = torch.where(text > 0, ink, ink2)
-    ink_amt = ink_amt * (0.85 + 0.15 * N.normalize01(c.fbm(x * 80, y * 80, 2)))
-    diffuse = N.lerp(diffuse, ink_col * torch.exp(0.05 * fib), ink_amt)
+    ink_amt = ink_amt * (0.85 + 0.15 * noise_fields.normalize01(c.fbm(x * 80, y * 80, 2)))
+    diffuse = noise_fields.lerp(diffuse, ink_col * torch.exp(0.05 * fib), ink_amt)
     coated = c.flag(0.3)
     roughness = torch.where(coated > 0, c.p(0.3, 0.5), c.p(0.7, 0.95)) + 0.04 * fib - 0.15 * ink_amt * c.p(0, 1)
     height = height + 0.1 * ink_amt * c.p(0, 1)
     creased = c.flag(0.3)
-    cx, cy = N.rotate(x, y, c.p(-PI, PI))
+    cx, cy = noise_fields.rotate(x, y, c.p(-PI, PI))
     fold = torch.exp(-((cy - c.p(-0.6, 0.6)) / 0.02) ** 2) * creased
     height = height - 0.3 * fold
     return _out(height, diffuse, roughness, c.spec(0.03, 0.045), c.p(0.005, 0.015))
@@ -757,21 +757,21 @@ def bark(g, batch, size, device, dtype=torch.float32):
     c = _Ctx(g, batch, size, device, dtype)
     x, y = c.rot(0.15)
     sx = c.p(3, 12)
-    xs, ys = N.warp(g, x * sx, y * sx * c.p(0.15, 0.4), batch, c.p(0.2, 0.7), 1.0, 4)
+    xs, ys = noise_fields.warp(g, x * sx, y * sx * c.p(0.15, 0.4), batch, c.p(0.2, 0.7), 1.0, 4)
     rid = c.fbm(xs, ys, 5, mode="ridged")
     plates = c.worley(xs * 0.8, ys * 0.8, jitter=1.0, channels=1)
-    plate_edge = N.smoothstep(0.0, 0.25, plates["f2"] - plates["f1"])
+    plate_edge = noise_fields.smoothstep(0.0, 0.25, plates["f2"] - plates["f1"])
     mix = c.p(0.1, 0.5)
-    height = N.normalize01((1 - mix) * N.normalize01(rid) + mix * plate_edge * (0.7 + 0.3 * plates["value"]))
+    height = noise_fields.normalize01((1 - mix) * noise_fields.normalize01(rid) + mix * plate_edge * (0.7 + 0.3 * plates["value"]))
     height = height ** c.p(0.5, 1.2)
     fine = c.fbm(x * 60, y * 20, 3)
     height = (height + 0.05 * fine).clamp(0, 1)
     base = c.hsv((0.04, 0.12), (0.1, 0.45), (0.15, 0.5))
     diffuse = base * torch.exp(0.6 * (height - 0.5) + 0.1 * fine + 0.1 * c.fbm(x * 4, y * 4, 3))
-    lichen = N.smoothstep(0.65, 0.85, N.normalize01(c.fbm(x * c.p(2, 6), y * c.p(2, 6), 5))) * c.flag(0.35)
-    lichen = lichen * N.smoothstep(0.3, 0.6, height)
+    lichen = noise_fields.smoothstep(0.65, 0.85, noise_fields.normalize01(c.fbm(x * c.p(2, 6), y * c.p(2, 6), 5))) * c.flag(0.35)
+    lichen = lichen * noise_fields.smoothstep(0.3, 0.6, height)
     lcol = c.hsv((0.12, 0.3), (0.1, 0.35), (0.35, 0.7))
-    diffuse = N.lerp(diffuse, lcol * torch.exp(0.15 * fine), lichen)
+    diffuse = noise_fields.lerp(diffuse, lcol * torch.exp(0.15 * fine), lichen)
     roughness = c.p(0.75, 1.0) + 0.05 * fine
     diffuse, roughness = _grime(c, height, diffuse, roughness, c.p(0.3, 1.0), 0.01,
                                 colour=c.hsv((0.05, 0.1), (0.2, 0.4), (0.03, 0.1)))
@@ -784,7 +784,7 @@ def ground(g, batch, size, device, dtype=torch.float32):
     x, y = c.x, c.y
     kind = c.p(0, 3)  # <1 asphalt, <2 gravel / pebbles, else soil with stones
     sc = torch.where(kind < 1, c.p(25, 60), torch.where(kind < 2, c.p(5, 20), c.p(8, 25)))
-    xs, ys = N.warp(g, x * sc, y * sc, batch, c.p(0.1, 0.3), 0.8)
+    xs, ys = noise_fields.warp(g, x * sc, y * sc, batch, c.p(0.1, 0.3), 0.8)
     w = c.worley(xs, ys, jitter=1.0, channels=4)
     size_r = 0.3 + 0.4 * w["value"][:, 3:4]
     present = (w["value"][:, 2:3] < torch.where(kind < 1, c.p(0.5, 0.9), torch.where(kind < 2, c.p(0.9, 1.0), c.p(0.2, 0.5)))).to(dtype)
@@ -796,9 +796,9 @@ def ground(g, batch, size, device, dtype=torch.float32):
     stone_base = torch.where(kind < 1, c.hsv((0, 1), (0, 0.1), (0.3, 0.6)), c.hsv((0.0, 0.14), (0.05, 0.35), (0.3, 0.8)))
     sv = w["value"][:, :3]
     stone_col = stone_base * torch.exp((sv[:, :1] - 0.5) * 1.2 + (sv - 0.5) * 0.25 + 0.1 * c.fbm(xs * 3, ys * 3, 2))
-    cover = N.smoothstep(0.0, 0.25, stone)
-    diffuse = N.lerp(binder * torch.exp(0.15 * binder_n), stone_col, cover)
-    roughness = N.lerp(c.p(0.7, 1.0) + 0.05 * binder_n, c.p(0.45, 0.85) + 0.0 * binder_n, cover)
+    cover = noise_fields.smoothstep(0.0, 0.25, stone)
+    diffuse = noise_fields.lerp(binder * torch.exp(0.15 * binder_n), stone_col, cover)
+    roughness = noise_fields.lerp(c.p(0.7, 1.0) + 0.05 * binder_n, c.p(0.45, 0.85) + 0.0 * binder_n, cover)
     roughness = roughness - 0.3 * asphalt * (1 - cover) * c.flag(0.3)  # fresh, glossier binder
     diffuse, roughness = _grime(c, height, diffuse, roughness, c.p(0.2, 0.9), 0.015)
     return _out(height, diffuse, roughness, c.spec(0.03, 0.05), c.p(0.03, 0.1))

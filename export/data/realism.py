@@ -34,6 +34,7 @@ import cv2
 import numpy as np
 
 from export.files import shared_root
+from svbrdf_cli import conventions as cv
 
 #: Real-photo sets under ``<shared>/data/real/``, in the default order.
 REAL_SETS = ("paper_real", "des18_real", "luo2024", "henzler_train")
@@ -47,7 +48,6 @@ DIFFERS_AT = 0.5
 #: Floor on the inter-decile range in ``compare`` (all statistics are O(0.01..1)).
 MIN_SPREAD = 1e-3
 
-_LUMA = np.array([0.2126, 0.7152, 0.0722])
 _IMAGE_EXT = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
 
 #: Statistic names in table order, with a one-line meaning (the full definitions are in
@@ -75,7 +75,7 @@ STATISTICS = {
 # ----------------------------------------------------------------------------- statistics
 
 def _luma(img):
-    return img[..., :3] @ _LUMA
+    return img[..., :3] @ np.asarray(cv.LUMA)
 
 
 def _noise_sigma(luma, valid, block):

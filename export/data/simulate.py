@@ -38,7 +38,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from export.render import targets as T
+from export.render import targets
 from export.render.brdf import render_maps, surface_positions
 from svbrdf_cli import conventions as cv
 
@@ -228,7 +228,7 @@ def photograph(maps, capture, g=None, quantize=True):
     d = maps["diffuse"]
     cam = capture["camera"].to(d)
     light = capture["light"].to(d)
-    intensity = T.auto_exposure(maps, light=light, camera=cam, target=capture["exposure"].to(d))
+    intensity = targets.auto_exposure(maps, light=light, camera=cam, target=capture["exposure"].to(d))
     if "power" in capture:  # lit at a known flash power where one is given (> 0)
         power = capture["power"].to(d)
         intensity = torch.where(power > 0, power.reshape(intensity.shape), intensity)

@@ -108,7 +108,7 @@ class UpBlock(nn.Module):
 class Decoder(nn.Module):
     """The UNet decoder shared by :class:`UNet` and the GAD-UNet: from the
     deepest of ``skips`` (one per level, widths ``widths``) up through
-    :class:`UpBlock`\ s to a 1x1 head (no activation)."""
+    :class:`UpBlock` blocks to a 1x1 head (no activation)."""
 
     def __init__(self, widths, out_channels, norm=None):
         super().__init__()

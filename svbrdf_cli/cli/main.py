@@ -1,11 +1,11 @@
 """The ``svbrdf`` command group: verbosity, version, error reporting, sub-commands."""
 
 import logging
-import sys
 
 import click
 
 from svbrdf_cli import __version__
+from svbrdf_cli.cli.options import quiet_opt, set_verbosity, verbose_opt
 from svbrdf_cli.errors import SvbrdfError
 
 
@@ -27,20 +27,19 @@ Examples:
   svbrdf export textures/photo -o photo_gltf --preset gltf
   svbrdf markers sheet.png                         a sheet for --crop markers
 """)
-@click.option("-v", "--verbose", count=True, help="More log output (repeat for more).")
-@click.option("-q", "--quiet", is_flag=True, help="Only errors.")
+@verbose_opt
+@quiet_opt
 @click.version_option(__version__, prog_name="svbrdf")
-@click.pass_context
-def cli(ctx, verbose, quiet):
+def cli(verbose, quiet):
     """Single-image material capture: flash photo in, PBR texture set out."""
-    level = logging.ERROR if quiet else (logging.WARNING, logging.INFO, logging.DEBUG)[min(verbose, 2)]
-    logging.basicConfig(level=level, format="%(levelname)s: %(message)s", stream=sys.stderr)
-    ctx.obj = {"quiet": quiet, "verbose": verbose}
+    set_verbosity(quiet, verbose)
 
 
 def _register():
-    from svbrdf_cli.cli.capture import batch_cmd, capture_cmd, markers_cmd
-    from svbrdf_cli.cli.export import export_cmd
+    from svbrdf_cli.cli.batch import batch_cmd
+    from svbrdf_cli.cli.capture import capture_cmd
+    from svbrdf_cli.cli.export_set import export_cmd
+    from svbrdf_cli.cli.markers import markers_cmd
     from svbrdf_cli.cli.render import render_cmd
 
     for cmd in (capture_cmd, batch_cmd, export_cmd, render_cmd, markers_cmd):

@@ -4,7 +4,8 @@ import os
 
 import click
 
-from svbrdf_cli.cli.options import light_opt, overwrite_opt
+from svbrdf_cli.cli.options import force_opt, light_opt
+from svbrdf_cli.errors import OutputExistsError
 
 
 @click.command("render")
@@ -14,8 +15,8 @@ from svbrdf_cli.cli.options import light_opt, overwrite_opt
 @click.option("--intensity", type=click.FloatRange(min=0, min_open=True), default=None,
               help="Light intensity (default: the conventions' flash intensity).")
 @click.option("--exposure", type=float, default=0.0, show_default=True, help="Exposure change in stops.")
-@overwrite_opt
-def render_cmd(maps, output, light, intensity, exposure, overwrite):
+@force_opt("an existing image")
+def render_cmd(maps, output, light, intensity, exposure, force):
     """Relight a native map set (normal/diffuse/roughness/specular.png).
 
     Renders the maps as a flat surface under a point light with the same
@@ -33,8 +34,8 @@ def render_cmd(maps, output, light, intensity, exposure, overwrite):
     from svbrdf_cli.mapset import read_map_set
     from svbrdf_cli.shading import render_maps
 
-    if os.path.exists(output) and not overwrite:
-        raise click.UsageError(f"'{output}' exists; use --overwrite to replace it.")
+    if os.path.exists(output) and not force:
+        raise OutputExistsError(f"'{output}' exists; use --force to replace it.")
     m = read_map_set(maps)
     kwargs = {"light": light or cv.FLASH_POSITION}
     kwargs["intensity"] = (intensity if intensity is not None else cv.LIGHT_INTENSITY) * 2.0 ** exposure

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from export.auto import choose_step
+from export.auto_calibration import choose_step
 
 N = 200
 
@@ -47,3 +47,11 @@ def test_the_signals_own_cost_counts():
     # Never stepping up is out of tolerance here: a rule that is within it wins, whatever its cost.
     chosen, _ = choose_step(err_lo, err_hi, 0.02, 0.25, {"dear": good}, {"dear": 5.0})
     assert chosen["threshold"] is not None and chosen["error"] <= min(err_lo.mean(), err_hi.mean()) * 1.02
+
+
+def test_calibration_needs_two_tiers_and_says_so():
+    from export.auto_calibration import calibrate
+    from svbrdf_cli.errors import SvbrdfError
+
+    with pytest.raises(SvbrdfError, match="two installed tiers; found lite"):
+        calibrate([], chains={"lite": None})

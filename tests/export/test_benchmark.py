@@ -4,15 +4,15 @@ import numpy as np
 import pytest
 import torch
 
-from export import stability as S
+from export import stability
 from svbrdf_cli import conventions as cv
 
 
-@pytest.mark.parametrize("name", [k for k, v in S.PERTURBATIONS.items() if v[1] is not None])
+@pytest.mark.parametrize("name", [k for k, v in stability.PERTURBATIONS.items() if v[1] is not None])
 def test_photometric_perturbations_keep_a_valid_linear_photo_and_change_it(name):
     rng = np.random.default_rng(0)
     lin = rng.uniform(0.05, 0.6, (64, 64, 3)).astype(np.float32)
-    out = S.PERTURBATIONS[name][1](lin, rng)
+    out = stability.PERTURBATIONS[name][1](lin, rng)
     assert out.shape == lin.shape and out.dtype == np.float32
     assert np.isfinite(out).all() and out.min() >= 0 and out.max() <= 1
     assert np.abs(out - lin).mean() > 1e-3
@@ -22,9 +22,9 @@ def test_rendered_variants_differ_where_they_should():
     maps = {"normal": torch.tensor([0.0, 0.0, 1.0]).reshape(3, 1, 1).expand(3, 64, 64).clone(),
             "diffuse": torch.full((3, 64, 64), 0.3), "roughness": torch.full((1, 64, 64), 0.3),
             "specular": torch.full((3, 64, 64), 0.04)}
-    centred = S.rendered_photo(maps, "centred")
-    off = S.rendered_photo(maps, "off_centre")
-    soft = S.rendered_photo(maps, "no_flash")
+    centred = stability.rendered_photo(maps, "centred")
+    off = stability.rendered_photo(maps, "off_centre")
+    soft = stability.rendered_photo(maps, "no_flash")
     for img in (centred, off, soft):
         assert img.shape == (64, 64, 3) and np.isfinite(img).all() and img.min() >= 0
     # The flash's hot spot moves with it: the brightest quarter is the light's (x right, y up).
@@ -48,7 +48,7 @@ def test_benchmark_runs_on_two_samples(shared_data, tmp_path):
         assert 0 < r["s_256"] and 0 < r["s_2048"]
     assert res["samples"] == 2 and set(res["confidence"]["maps"]) == set(cv.MAP_NAMES)
     st = res["stability"]
-    assert set(st["rows"]) == set(S.PERTURBATIONS) and st["failures"] == []
+    assert set(st["rows"]) == set(stability.PERTURBATIONS) and st["failures"] == []
     assert st["photos"] == {"des19": 2, "real": 2}
     for f in ("speed_vs_accuracy.png", "stability_gallery.png"):
         assert (tmp_path / "fig" / f).stat().st_size > 10_000

@@ -2,7 +2,6 @@ import numpy as np
 import pytest
 
 from export.data import cc0
-from svbrdf_cli import conventions as cv
 
 
 def test_metalness_to_specular_hand_values():

@@ -41,10 +41,10 @@ def test_stage_parity_with_onnxruntime(tmp_path, stage, refine):
     feeds = _feeds(net, stage, 96, 64)
     sess = ort.InferenceSession(path, providers=["CPUExecutionProvider"])
     got = sess.run(list(outs), feeds)
-    from export.onnx_export import _Stage
+    from export.onnx_export import StageModule
 
     with torch.no_grad():
-        ref = _Stage(net, stage)(*(torch.from_numpy(feeds[n]) for n in ins))
+        ref = StageModule(net, stage)(*(torch.from_numpy(feeds[n]) for n in ins))
     for name, a, b in zip(outs, got, ref):
         assert a.shape == tuple(b.shape), name
         assert np.abs(a - b.numpy()).max() < 1e-4, name

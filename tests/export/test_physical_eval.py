@@ -1,14 +1,12 @@
 """The physical estimate against the floor on the validation sets, and its colour on the real photos
 (the numbers of docs/benchmarks.md, kept from regressing). Skipped without ../shared."""
 
-import os
 import tempfile
 
 import numpy as np
-import pytest
 
 from export import colour
-from export import methods as M
+from export import methods
 
 
 def test_physical_beats_the_floor_on_des19_and_the_card(shared_data):
@@ -17,7 +15,7 @@ def test_physical_beats_the_floor_on_des19_and_the_card(shared_data):
 
     des19 = str(shared_data / "validation" / "des19")
     samples = load_des19(des19)
-    floor, phys = M.Floor(), M.Physical()
+    floor, phys = methods.Floor(), methods.Physical()
     f, _ = des19_accuracy(floor, samples, des19, tempfile.mkdtemp())
     p, _ = des19_accuracy(phys, samples, des19, tempfile.mkdtemp())
     assert p["diffuse"] < 0.6 * f["diffuse"] and p["roughness"] < f["roughness"]
@@ -29,14 +27,14 @@ def test_physical_beats_the_floor_on_des19_and_the_card(shared_data):
 
 
 def test_physical_keeps_the_colour_of_the_real_photos(shared_data):
-    from export import stability as S
+    from export import stability
 
-    from svbrdf_cli.capture import network_input
+    from svbrdf_cli.pipeline import network_input
 
-    real = S.real_crops(shared_data / "real", S.REAL_PHOTOS)
+    real = stability.real_crops(shared_data / "real", stability.REAL_PHOTOS)
     inputs = [(name, network_input(lin)) for name, lin in real]
-    rows = colour.evaluate([M.Physical()], inputs, log=lambda *a: None)["physical"]
-    assert len(rows) == S.REAL_PHOTOS
+    rows = colour.evaluate([methods.Physical()], inputs, log=lambda *a: None)["physical"]
+    assert len(rows) == stability.REAL_PHOTOS
     assert all(r["ok"] is not False for r in rows), [r for r in rows if r["ok"] is False]
 
 

@@ -1,7 +1,6 @@
-import pytest
 import torch
 
-from export.render import targets as T
+from export.render import targets
 from svbrdf_cli import conventions as cv
 
 
@@ -22,8 +21,8 @@ def _maps(b=2, h=64, w=64, rough=None, seed=0, bumpy=True):
 
 
 def test_shapes_and_ranges():
-    out = T.intermediate_targets(_maps())
-    assert set(out) == set(T.TARGET_NAMES)
+    out = targets.intermediate_targets(_maps())
+    assert set(out) == set(targets.TARGET_NAMES)
     for k, v in out.items():
         assert v.shape == (2, 3, 64, 64), k
         assert torch.isfinite(v).all() and v.min() >= 0 and v.max() <= 1, k
@@ -31,20 +30,20 @@ def test_shapes_and_ranges():
 
 def test_bumpiness_flattened_equals_input_for_flat_normals():
     maps = _maps(bumpy=False)
-    torch.testing.assert_close(T.bumpiness_flattened(maps), T.flash_image(maps))
+    torch.testing.assert_close(targets.bumpiness_flattened(maps), targets.flash_image(maps))
 
 
 def test_bumpiness_flattened_differs_for_bumpy_normals():
     maps = _maps()
-    assert (T.bumpiness_flattened(maps) - T.flash_image(maps)).abs().mean() > 0.01
+    assert (targets.bumpiness_flattened(maps) - targets.flash_image(maps)).abs().mean() > 0.01
 
 
 def test_masks_zero_where_nothing_is_suppressed():
     # r = 1: D = 1/pi everywhere for flat normals, between delta_s and delta_h: nothing changes.
     maps = _maps(rough=1.0, bumpy=False)
     assert cv.LOWLIGHT_NDF_THRESHOLD < 1 / torch.pi < cv.HIGHLIGHT_NDF_THRESHOLD
-    assert T.highlight_mask(maps).abs().max() == 0
-    assert T.bumpiness_mask(maps).abs().max() == 0
+    assert targets.highlight_mask(maps).abs().max() == 0
+    assert targets.bumpiness_mask(maps).abs().max() == 0
 
 
 def test_masks_are_zero_exactly_at_untouched_pixels():
@@ -54,7 +53,7 @@ def test_masks_are_zero_exactly_at_untouched_pixels():
     p = surface_positions(64, 64, maps["normal"])
     l = cv.normalize(torch.tensor(cv.FLASH_POSITION, dtype=torch.float64).view(1, 3, 1, 1) - p, axis=1)
     d = ndf_ggx((maps["normal"] * l).sum(1, keepdim=True), cv.roughness_to_alpha(maps["roughness"]))
-    mh, mb = T.highlight_mask(maps), T.bumpiness_mask(maps)
+    mh, mb = targets.highlight_mask(maps), targets.bumpiness_mask(maps)
     hi = (d > cv.HIGHLIGHT_NDF_THRESHOLD).expand_as(mh)
     lo = (d < cv.LOWLIGHT_NDF_THRESHOLD).expand_as(mb)
     assert hi.any() and lo.any()
@@ -65,7 +64,7 @@ def test_masks_are_zero_exactly_at_untouched_pixels():
 def test_highlight_removed_has_no_highlight_on_glossy():
     maps = _maps(rough=0.15, bumpy=False)
     maps["specular"].fill_(0.5)
-    i_bf, i_hr = T.bumpiness_flattened(maps), T.highlight_removed(maps)
+    i_bf, i_hr = targets.bumpiness_flattened(maps), targets.highlight_removed(maps)
     # glossy: I_bf has a saturated highlight at the centre, I_hr none
     assert i_bf.amax() > 0.99 and i_hr.amax() < 0.8 * i_bf.amax()
     assert i_hr.var() < 0.5 * i_bf.var()
@@ -84,34 +83,34 @@ def test_hr2_is_smoother_than_hr():
     maps["roughness"] = torch.where(torch.rand_like(maps["roughness"]) > 0.5, 0.1, 0.6).double()
     maps["diffuse"].fill_(0.2)
     maps["specular"].fill_(0.3)
-    hr, hr2 = T.highlight_removed(maps), T.highlight_removed(maps, high_roughness=True)
+    hr, hr2 = targets.highlight_removed(maps), targets.highlight_removed(maps, high_roughness=True)
     assert _roughness_of(hr2) < 0.5 * _roughness_of(hr)
 
 
 def test_highlight_removed_chunking_does_not_change_result():
     maps = _maps(b=2, h=16, w=16)
-    torch.testing.assert_close(T.highlight_removed(maps, chunk=7), T.highlight_removed(maps, chunk=100))
+    torch.testing.assert_close(targets.highlight_removed(maps, chunk=7), targets.highlight_removed(maps, chunk=100))
 
 
 def test_highlight_removed_per_sample_camera():
     maps = _maps(b=2, h=16, w=16)
     cams = torch.tensor([[0.0, 0.0, 2.0], [0.3, -0.2, 1.6]], dtype=torch.float64)
-    both = T.highlight_removed(maps, camera=cams)
+    both = targets.highlight_removed(maps, camera=cams)
     for i in range(2):
-        one = T.highlight_removed({k: v[i:i + 1] for k, v in maps.items()}, camera=cams[i])
+        one = targets.highlight_removed({k: v[i:i + 1] for k, v in maps.items()}, camera=cams[i])
         torch.testing.assert_close(both[i:i + 1], one)
 
 
 def test_auto_exposure_hits_target():
     maps = _maps()
-    e = T.auto_exposure(maps, target=0.4)
-    img = T.flash_image(maps, intensity=e)
+    e = targets.auto_exposure(maps, target=0.4)
+    img = targets.flash_image(maps, intensity=e)
     assert torch.allclose(img.mean((1, 2, 3)), torch.full((2,), 0.4, dtype=torch.float64), atol=1e-3)
 
 
 def test_targets_are_differentiable_in_the_maps():
     maps = {k: v[:1, :, :8, :8].clone().requires_grad_(True) for k, v in _maps().items()}
-    out = T.intermediate_targets(maps)
+    out = targets.intermediate_targets(maps)
     sum(v.sum() for v in out.values()).backward()
     assert all(torch.isfinite(v.grad).all() for v in maps.values())
 
@@ -129,17 +128,17 @@ def test_highlight_removed_matches_general_renderer():
         acc = 0
         for p, e in zip(pos, power):
             light = cam + torch.tensor([p[0], p[1], 0.0], dtype=torch.float64)
-            acc = acc + render(T.flat_normal(maps["diffuse"]), maps["diffuse"], r, maps["specular"],
+            acc = acc + render(targets.flat_normal(maps["diffuse"]), maps["diffuse"], r, maps["specular"],
                                light=light, camera=cam, intensity=float(e)).clamp(0, 1)
         ref = cv.image_to_encoded(acc / 20)
-        out = T.highlight_removed(maps, camera=cam, intensity=1.5, high_roughness=high, count=20, chunk=6)
+        out = targets.highlight_removed(maps, camera=cam, intensity=1.5, high_roughness=high, count=20, chunk=6)
         torch.testing.assert_close(out, ref, rtol=1e-9, atol=1e-9)
 
 
 def test_highlight_removed_pair_equals_separate_calls():
     maps = _maps(b=3, h=16, w=16)
     cam = torch.tensor([[0.1, 0.2, 2.0], [0.0, 0.0, 3.0], [-0.3, 0.1, 1.5]], dtype=torch.float64)
-    hr, hr2 = T.highlight_removed_pair(maps, cam, torch.tensor([1.0, 2.0, 0.5], dtype=torch.float64), count=12)
-    assert torch.allclose(hr, T.highlight_removed(maps, cam, torch.tensor([1.0, 2.0, 0.5], dtype=torch.float64), count=12))
-    assert torch.allclose(hr2, T.highlight_removed(maps, cam, torch.tensor([1.0, 2.0, 0.5], dtype=torch.float64),
+    hr, hr2 = targets.highlight_removed_pair(maps, cam, torch.tensor([1.0, 2.0, 0.5], dtype=torch.float64), count=12)
+    assert torch.allclose(hr, targets.highlight_removed(maps, cam, torch.tensor([1.0, 2.0, 0.5], dtype=torch.float64), count=12))
+    assert torch.allclose(hr2, targets.highlight_removed(maps, cam, torch.tensor([1.0, 2.0, 0.5], dtype=torch.float64),
                                                    high_roughness=True, count=12))

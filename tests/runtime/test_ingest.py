@@ -4,7 +4,7 @@ import pytest
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.errors import ImageReadError
 from svbrdf_cli.imageio import write_image
-from svbrdf_cli.ingest import load_photo, network_input
+from svbrdf_cli.ingest import load_photo
 
 
 def _write_oriented_jpeg(path, img, orientation):
@@ -41,12 +41,6 @@ def test_grey_and_alpha_become_rgb(tmp_path):
     write_image(tmp_path / "rgba.png", np.concatenate([np.full((40, 40, 3), 0.6), np.zeros((40, 40, 1))], -1))
     for name in ("grey.png", "rgba.png"):
         assert load_photo(tmp_path / name).linear.shape == (40, 40, 3), name
-
-
-def test_network_input_is_the_training_encoding(tmp_path):
-    write_image(tmp_path / "l.exr", np.full((40, 40, 3), 0.25, np.float32), bits=32)
-    x = network_input(load_photo(tmp_path / "l.exr"), exposure=1.0)
-    assert np.allclose(x, cv.image_to_encoded(np.float32(0.5)), atol=1e-6)
 
 
 @pytest.mark.parametrize("case", ["missing", "empty", "text", "truncated", "tiny"])

@@ -62,7 +62,7 @@ def test_provenance_matches_the_files(tier):
 
 
 def test_the_auto_rule_is_shipped_calibrated_for_the_installed_tiers():
-    from svbrdf_cli.auto import SIGNALS, load_rule
+    from svbrdf_cli.auto_tier import SIGNALS, load_rule
 
     rule = load_rule()  # raises when a tier it steps between is missing
     assert len(rule["ladder"]) >= 2 and rule["ladder"] == [t for t in installed_tiers() if t in rule["ladder"]]

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from svbrdf_cli import conventions as cv
-from svbrdf_cli import physical as P
+from svbrdf_cli import physical
 from svbrdf_cli.shading import render
 
 SIZE = 128
@@ -26,7 +26,7 @@ def _linear(stored):
 def test_flat_matte_plane_gives_its_albedo_back():
     """The nearest our BRDF has to a Lambertian plane: a dielectric (every surface the estimate
     assumes has F0 = 0.04) at roughness 1."""
-    stored, found = P.estimate(_photo([0.3, 0.3, 0.3], cv.DIELECTRIC_F0, 1.0))
+    stored, found = physical.estimate(_photo([0.3, 0.3, 0.3], cv.DIELECTRIC_F0, 1.0))
     d = _linear(stored)["diffuse"]
     assert np.abs(d.mean((0, 1)) / 0.3 - 1).max() < 0.02
     assert d.std() < 0.01  # no flash disc left in it
@@ -36,7 +36,7 @@ def test_flat_matte_plane_gives_its_albedo_back():
 def test_lambertian_plane_gives_its_albedo_over_the_dielectric_share():
     """A plane with no specular at all (F0 = 0): the estimate reads every surface as at least a
     dielectric, whose diffuse term is d (1 - 0.04), so the albedo comes back as 0.3 / 0.96 (2 %)."""
-    stored, found = P.estimate(_photo([0.3, 0.3, 0.3], 0.0, 0.5))
+    stored, found = physical.estimate(_photo([0.3, 0.3, 0.3], 0.0, 0.5))
     d = _linear(stored)["diffuse"]
     assert abs(d.mean() / (0.3 / (1 - cv.DIELECTRIC_F0)) - 1) < 0.02 and d.std() < 0.01
 
@@ -45,7 +45,7 @@ def test_lambertian_plane_gives_its_albedo_over_the_dielectric_share():
 def test_dielectric_plane_gives_albedo_f0_and_roughness(roughness):
     albedo = np.array([0.35, 0.2, 0.08])
     photo = _photo(albedo, cv.DIELECTRIC_F0, roughness)
-    stored, found = P.estimate(photo)
+    stored, found = physical.estimate(photo)
     lin = _linear(stored)
     assert np.abs(lin["diffuse"].mean((0, 1)) / albedo - 1).max() < 0.03
     # its maps re-render the photo
@@ -58,26 +58,26 @@ def test_dielectric_plane_gives_albedo_f0_and_roughness(roughness):
 
 
 def test_metals_are_dielectric_unless_asked():
-    stored, found = P.estimate(_photo(0.0, [0.9, 0.7, 0.3], 0.3))
+    stored, found = physical.estimate(_photo(0.0, [0.9, 0.7, 0.3], 0.3))
     assert found["metal"] is False and np.allclose(_linear(stored)["specular"], cv.DIELECTRIC_F0, atol=1e-3)
 
 
 def test_metal_gives_its_coloured_f0():
     gold = np.array([0.9, 0.7, 0.3])
-    stored, found = P.estimate(_photo(0.0, gold, 0.3), metals=True)
+    stored, found = physical.estimate(_photo(0.0, gold, 0.3), metals=True)
     assert found["metal"] is True
     f0 = _linear(stored)["specular"].mean((0, 1))
     assert np.abs(f0 - gold).max() < 0.05
 
 
 def test_perfect_mirror_metal_stays_finite():
-    stored, found = P.estimate(_photo(0.0, 1.0, 0.3), metals=True)
+    stored, found = physical.estimate(_photo(0.0, 1.0, 0.3), metals=True)
     assert found["metal"] is True
     assert all(np.isfinite(v).all() for v in stored.values())
 
 
 def test_off_centre_flash_is_found():
-    stored, found = P.estimate(_photo(0.3, cv.DIELECTRIC_F0, 0.4, light=(0.3, -0.2, cv.CAMERA_HEIGHT)))
+    stored, found = physical.estimate(_photo(0.3, cv.DIELECTRIC_F0, 0.4, light=(0.3, -0.2, cv.CAMERA_HEIGHT)))
     x, y = found["flash_foot"]
     # within 2 % of the image width (the surface spans 2 units)
     assert abs(x - 0.3) < 0.04 and abs(y + 0.2) < 0.04
@@ -92,7 +92,7 @@ def test_a_bump_gives_normals_with_the_right_sign():
     n = cv.normalize(np.stack([-gx, -gy, np.ones_like(h)], -1))
     # the shipped strength is 0 (measured: tilt from shading costs accuracy, docs/benchmarks.md); the
     # model it scales must still read a bump the right way round
-    stored, _ = P.estimate(_photo(0.4, cv.DIELECTRIC_F0, 0.6, normal=n), normal_strength=0.3)
+    stored, _ = physical.estimate(_photo(0.4, cv.DIELECTRIC_F0, 0.6, normal=n), normal_strength=0.3)
     est = _linear(stored)["normal"]
     right = (p[..., 0] > 0.1) & (p[..., 0] < 0.3) & (np.abs(p[..., 1]) < 0.1)
     top = (p[..., 1] > 0.1) & (p[..., 1] < 0.3) & (np.abs(p[..., 0]) < 0.1)
@@ -104,8 +104,8 @@ def test_a_bump_gives_normals_with_the_right_sign():
 
 def test_clipped_highlight_is_filled_not_baked_in():
     img = _photo([0.3, 0.3, 0.3], cv.DIELECTRIC_F0, 0.12, intensity=3 * cv.FLASH_INTENSITY)
-    assert (img >= P.CLIPPED).any()
-    stored, _ = P.estimate(img)
+    assert (img >= physical.CLIPPED).any()
+    stored, _ = physical.estimate(img)
     d = _linear(stored)["diffuse"]
     centre = d[SIZE // 2 - 4:SIZE // 2 + 4, SIZE // 2 - 4:SIZE // 2 + 4]
     assert abs(centre.mean() / np.median(d) - 1) < 0.1
@@ -114,13 +114,13 @@ def test_clipped_highlight_is_filled_not_baked_in():
 def test_extreme_inputs_stay_finite():
     for img in (np.zeros((64, 64, 3), np.float32), np.ones((64, 64, 3), np.float32),
                 np.random.default_rng(0).random((64, 96, 3)).astype(np.float32)):
-        stored, _ = P.estimate(img)
+        stored, _ = physical.estimate(img)
         for k, v in stored.items():
             assert v.shape[:2] == img.shape[:2] and np.isfinite(v).all() and v.min() >= 0 and v.max() <= 1, k
 
 
 def test_model_interface_matches_the_chain():
-    from svbrdf_cli.inference import DEFAULT_MODEL, check_model, load_model
+    from svbrdf_cli.models import DEFAULT_MODEL, check_model, load_model
 
     assert DEFAULT_MODEL == "physical"
     check_model("physical")

@@ -6,11 +6,9 @@ import os
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
 from svbrdf_cli import conventions as cv
 from svbrdf_cli import imageio, mapset, presets
-from svbrdf_cli.cli.main import cli
 from svbrdf_cli.errors import ImageWriteError
 from svbrdf_cli.imageio import read_image
 
@@ -240,7 +238,7 @@ def test_blender_layout_and_node_wrangler_names(maps, tmp_path):
     groups = {"base": {"base", "color", "basecolor"}, "rough": {"roughness"}, "metal": {"metallic"},
               "normal": {"normal"}, "height": {"height"}}
     for name in names[:-1]:
-        hits = [g for g, tags in groups.items() if set(presets._name_components(name)) & tags]
+        hits = [g for g, tags in groups.items() if set(presets.name_components(name)) & tags]
         assert len(hits) == 1, (name, hits)
 
 
@@ -378,31 +376,3 @@ def test_failure_with_force_keeps_the_old_set(maps, tmp_path, monkeypatch):
     with pytest.raises(ImageWriteError):
         presets.write_unreal(tmp_path / "ue", maps, force=True)
     assert os.listdir(tmp_path) == ["ue"] and sorted(os.listdir(tmp_path / "ue")) == before
-
-
-# --------------------------------------------------------------------------
-# CLI
-# --------------------------------------------------------------------------
-
-def test_cli_export(maps, tmp_path):
-    mapset.write_map_set(tmp_path / "maps", maps, bits=16)
-    runner, out = CliRunner(), tmp_path / "ue"
-    args = ["export", str(tmp_path / "maps"), "-o", str(out), "--preset", "unreal", "--bits", "16"]
-    res = runner.invoke(cli, args)
-    assert res.exit_code == 0, res.output
-    orm = read_image(out / "ORM.png")
-    np.testing.assert_allclose(right(orm), [1.0, 0.7, 1.0], atol=2e-3)
-    assert read_image(out / "Normal.png")[..., 1].max() < 0.4
-
-    res = runner.invoke(cli, args)
-    assert res.exit_code == 1
-    msg = res.output.strip()
-    assert "\n" not in msg and "already exists" in msg and "--force" in msg and str(out) in msg
-
-    assert runner.invoke(cli, args + ["--force"]).exit_code == 0
-
-    res = runner.invoke(cli, ["export", str(tmp_path / "maps"), "-o", str(tmp_path / "g"), "--preset", "gltf",
-                              "--format", "exr"])
-    assert res.exit_code == 2 and "PNG only" in res.output
-    res = runner.invoke(cli, ["export", str(tmp_path / "nothing"), "-o", str(tmp_path / "x"), "--preset", "gltf"])
-    assert res.exit_code == 1 and "normal.png" in res.output

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from svbrdf_cli import rectify as R
+from svbrdf_cli import rectify
 
 CELL = 64
 
@@ -12,8 +12,8 @@ def _textured_sheet(seed=0):
     """The sheet with a blurred random texture in its window (linear RGB)."""
     import cv2
 
-    sheet = R.marker_sheet(CELL, label=False).astype(np.float32) / 255
-    lo, hi = (c * CELL for c in R.WINDOW_CELLS)
+    sheet = rectify.marker_sheet(CELL, label=False).astype(np.float32) / 255
+    lo, hi = (c * CELL for c in rectify.WINDOW_CELLS)
     tex = np.random.default_rng(seed).uniform(0.1, 0.9, (hi - lo, hi - lo)).astype(np.float32)
     sheet[lo:hi, lo:hi] = cv2.GaussianBlur(tex, (0, 0), 2)
     return np.repeat(sheet[..., None], 3, -1)
@@ -35,7 +35,7 @@ def _photograph(sheet, dst, size=(1400, 1100), gain=0.4, noise=0.0, seed=0):
 def _true_window(m):
     import cv2
 
-    lo, hi = (c * CELL - 0.5 for c in R.WINDOW_CELLS)
+    lo, hi = (c * CELL - 0.5 for c in rectify.WINDOW_CELLS)
     return cv2.perspectiveTransform(np.float32([[[lo, lo], [hi, lo], [hi, hi], [lo, hi]]]), m)[0]
 
 
@@ -46,7 +46,7 @@ def _true_window(m):
 ])
 def test_marker_rectification_error_below_two_pixels(dst, noise):
     photo, m = _photograph(_textured_sheet(), dst, noise=noise)
-    c = R.marker_crop(photo)
+    c = rectify.marker_crop(photo)
     assert len(c.report["tags"]) >= 12
     quad = np.array(c.report["quad"])
     # The detected window corners against the true ones (in any starting order for a rotated sheet).
@@ -54,7 +54,7 @@ def test_marker_rectification_error_below_two_pixels(dst, noise):
     err = min(np.abs(np.roll(quad, k, axis=0) - true).max() for k in range(4))
     assert err < 2.0, err
     # The rectified window looks like the texture that was printed in it.
-    lo, hi = (c * CELL for c in R.WINDOW_CELLS)
+    lo, hi = (c * CELL for c in rectify.WINDOW_CELLS)
     side = c.image.shape[0]
     assert c.image.shape == (side, side, 3) and side > 100
 
@@ -64,8 +64,8 @@ def test_marker_rectified_pixels_match_the_sheet():
 
     sheet = _textured_sheet(seed=3)
     photo, m = _photograph(sheet, [[300, 200], [1150, 260], [1100, 950], [250, 900]], gain=1.0)
-    c = R.marker_crop(photo)
-    lo, hi = (k * CELL for k in R.WINDOW_CELLS)
+    c = rectify.marker_crop(photo)
+    lo, hi = (k * CELL for k in rectify.WINDOW_CELLS)
     ref = cv2.resize(sheet[lo:hi, lo:hi], c.image.shape[:2][::-1], interpolation=cv2.INTER_AREA)
     inner = slice(8, -8)
     assert np.abs(c.image[inner, inner] - ref[inner, inner]).mean() < 0.03
@@ -73,8 +73,8 @@ def test_marker_rectified_pixels_match_the_sheet():
 
 def test_too_few_markers_is_a_clear_error():
     photo = np.full((600, 800, 3), 0.4, np.float32)
-    with pytest.raises(R.CropError, match="marker tags"):
-        R.marker_crop(photo)
+    with pytest.raises(rectify.CropError, match="marker tags"):
+        rectify.marker_crop(photo)
 
 
 def test_the_shared_printed_sheet_is_recognised(shared_data):
@@ -85,9 +85,9 @@ def test_the_shared_printed_sheet_is_recognised(shared_data):
     sheet = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE).astype(np.float32) / 255
     s = sheet.shape[0]
     photo, m = _photograph(np.repeat(sheet[..., None], 3, -1), [[300, 200], [1150, 260], [1100, 950], [250, 900]])
-    c = R.marker_crop(photo)
-    u = s / R.SHEET_CELLS
-    lo, hi = (k * u - 0.5 for k in R.WINDOW_CELLS)
+    c = rectify.marker_crop(photo)
+    u = s / rectify.SHEET_CELLS
+    lo, hi = (k * u - 0.5 for k in rectify.WINDOW_CELLS)
     true = cv2.perspectiveTransform(np.float32([[[lo, lo], [hi, lo], [hi, hi], [lo, hi]]]), m)[0]
     assert np.abs(np.array(c.report["quad"]) - true).max() < 2.0
 
@@ -96,7 +96,7 @@ def test_manual_corners_any_order():
     img = np.zeros((200, 300, 3), np.float32)
     img[50:150, 100:200] = 1.0
     quad = [(199.5, 149.5), (99.5, 49.5), (199.5, 49.5), (99.5, 149.5)]  # shuffled
-    c = R.quad_crop(img, quad)
+    c = rectify.quad_crop(img, quad)
     assert c.report["quad"][0] == [99.5, 49.5]
     assert c.image.shape == (100, 100, 3)
     assert c.image[2:-2, 2:-2].min() > 0.99
@@ -107,8 +107,8 @@ def test_manual_corners_any_order():
     ([(10, 10), (20, 10), (20, 20), (10, 20)], "smaller"),
 ])
 def test_bad_manual_corners(quad, match):
-    with pytest.raises(R.CropError, match=match):
-        R.quad_crop(np.zeros((200, 300, 3), np.float32), quad)
+    with pytest.raises(rectify.CropError, match=match):
+        rectify.quad_crop(np.zeros((200, 300, 3), np.float32), quad)
 
 
 def _flash(h, w, cx, cy):
@@ -118,14 +118,14 @@ def _flash(h, w, cx, cy):
 
 
 def test_auto_crop_is_the_largest_square_around_the_highlight():
-    c = R.auto_crop(_flash(600, 900, 600, 300))
+    c = rectify.auto_crop(_flash(600, 900, 600, 300))
     x0, y0, side, _ = c.report["box"]
     assert c.report["anchor"] == "highlight" and side == 600 and y0 == 0
     assert abs(x0 + side / 2 - 600) < 6           # centred on the highlight
-    c = R.auto_crop(_flash(600, 900, 850, 300))   # too close to the edge: slides as far as it can
+    c = rectify.auto_crop(_flash(600, 900, 850, 300))   # too close to the edge: slides as far as it can
     assert c.report["box"][0] == 300
 
 
 def test_auto_crop_without_highlight_is_the_centre():
-    c = R.auto_crop(np.full((400, 700, 3), 0.3, np.float32))
+    c = rectify.auto_crop(np.full((400, 700, 3), 0.3, np.float32))
     assert c.report["anchor"] == "centre" and c.report["box"] == [150, 0, 400, 400]

@@ -73,10 +73,3 @@ def test_confidence_is_high_for_an_equivariant_model_and_lower_where_passes_disa
         assert conf[name].shape == (16, 16) and np.allclose(conf[name], 1, atol=1e-5)
     biased = tta.confidence(tta.passes(_Biased(), img))
     assert biased["diffuse"].mean() < 0.2 and np.allclose(biased["roughness"], 1, atol=1e-5)
-
-
-def test_mean_maps_keeps_unit_normals():
-    res = [_maps(s) for s in range(3)]
-    m = tta.mean_maps(res)
-    assert np.allclose(np.linalg.norm(cv.decode_normals(m["normal"]), axis=-1), 1, atol=1e-5)
-    np.testing.assert_allclose(m["diffuse"], np.mean([r["diffuse"] for r in res], 0), atol=1e-6)

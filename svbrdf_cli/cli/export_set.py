@@ -2,7 +2,8 @@
 
 import click
 
-from svbrdf_cli.presets import PNG_ONLY_PRESETS, PRESETS
+from svbrdf_cli.cli.options import bits_opt, check_format, force_opt, format_opt
+from svbrdf_cli.presets import PRESETS
 
 
 @click.command("export")
@@ -10,12 +11,10 @@ from svbrdf_cli.presets import PNG_ONLY_PRESETS, PRESETS
 @click.option("-o", "--output", required=True, type=click.Path(), help="Folder to write the texture set into (must not exist).")
 @click.option("--preset", required=True, type=click.Choice(list(PRESETS)),
               help="Target layout: native maps, glTF 2.0, Unreal (ORM, DirectX normal), Unity HDRP (MaskMap), Blender.")
-@click.option("--bits", type=click.Choice(["8", "16"]), default="8", show_default=True,
-              help="PNG bit depth (height maps are always 16-bit).")
-@click.option("--format", "fmt", type=click.Choice(["png", "exr"]), default="png", show_default=True,
-              help="File format of linear data maps (normal, roughness, packed masks, height); "
-                   "exr writes 32-bit float. Base colour stays sRGB PNG.")
-@click.option("--force", is_flag=True, help="Replace an existing output folder (atomically).")
+@bits_opt("PNG bit depth (height maps are always 16-bit).")
+@format_opt("File format of linear data maps (normal, roughness, packed masks, height); "
+            "exr writes 32-bit float. Base colour stays sRGB PNG.")
+@force_opt("an existing output folder (atomically)")
 def export_cmd(mapset, output, preset, bits, fmt, force):
     """Write a native map set as an engine or DCC texture set, without re-running inference.
 
@@ -35,8 +34,7 @@ def export_cmd(mapset, output, preset, bits, fmt, force):
     from svbrdf_cli.mapset import read_map_set
     from svbrdf_cli.presets import write_preset
 
-    if fmt != "png" and preset in PNG_ONLY_PRESETS:
-        raise click.UsageError(f"The {preset} preset writes PNG only; drop --format {fmt}.")
+    check_format(preset, fmt)
     maps = read_map_set(mapset)
     paths = write_preset(preset, output, maps, bits=int(bits), fmt=fmt, force=force)
     h, w = maps["normal"].shape[:2]

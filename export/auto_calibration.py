@@ -1,14 +1,14 @@
 """Calibrate ``--model auto`` on generated photos, and measure it on Des19 and the real photos.
 
-    python -m export.auto                    # calibrate: writes svbrdf_cli/models/auto.json
-    python -m export.auto --samples 16 --out /tmp/auto.json      # a smoke run
+    python -m export.auto_calibration                  # calibrate: writes svbrdf_cli/models/auto.json
+    python -m export.auto_calibration --samples 16 --out /tmp/auto.json    # a smoke run
 
 **Calibration.** Photos from our own data engine (:mod:`export.data.dataset`,
 seed :data:`CALIBRATION_SEED`, which no training run uses) go through every
 installed tier; each tier's error is the re-rendering RMSE under 9 lights
 against the photo's ground truth (:func:`export.evaluate.relight_rmse`),
 its cost the median seconds per 256² image on this CPU. For each step up the
-ladder (tier i -> tier i + 1) and each signal of :data:`svbrdf_cli.auto.SIGNALS`,
+ladder (tier i -> tier i + 1) and each signal of :data:`svbrdf_cli.auto_tier.SIGNALS`,
 every threshold is tried: photos whose signal is above it (or, the other
 candidate, below it) take the next tier.
 The rule kept is the *cheapest* whose mean error is within ``--margin``
@@ -34,10 +34,11 @@ import numpy as np
 import torch
 
 from export.evaluate import relight_rmse
-from export.files import write_json
-from svbrdf_cli import auto as A
+from export.files import command_errors, write_json
+from svbrdf_cli import auto_tier
 from svbrdf_cli import conventions as cv
-from svbrdf_cli.bench import median_seconds
+from svbrdf_cli.capture_speed import median_seconds
+from svbrdf_cli.errors import SvbrdfError
 from svbrdf_cli.inference import MODELS_DIR, Chain, installed_tiers
 from svbrdf_cli.mapset import stored_to_linear
 
@@ -60,13 +61,13 @@ def tier_error(stored, gt):
 
 def generated(count, seed=CALIBRATION_SEED, size=256):
     """``count`` (network input (H, W, 3), linear GT maps of (C, H, W)) from the data engine."""
-    from export.data import dataset as D
+    from export.data import dataset
 
     g = torch.Generator().manual_seed(seed)
-    bank = D.SeedBank.find(None)
+    bank = dataset.SeedBank.find(None)
     out = []
     while len(out) < count:
-        batch = D.make_batch(g, min(8, count - len(out)), D.DataConfig(size=size, targets=()), seeds=bank)
+        batch = dataset.make_batch(g, min(8, count - len(out)), dataset.DataConfig(size=size, targets=()), seeds=bank)
         out += [(batch["photo"][i].permute(1, 2, 0).numpy(), {k: batch[k][i] for k in cv.MAP_NAMES})
                 for i in range(batch["photo"].shape[0])]
     return out
@@ -78,7 +79,7 @@ def tier_seconds(chains, repeat=5, size=256):
     tiers = {t: median_seconds(lambda c=c: c(x), repeat) for t, c in chains.items()}
     first = next(iter(chains.values()))
     maps = first(x)
-    signals = {n: median_seconds(lambda n=n: A.signal(n, x, maps, first), repeat) for n in A.SIGNALS}
+    signals = {n: median_seconds(lambda n=n: auto_tier.signal(n, x, maps, first), repeat) for n in auto_tier.SIGNALS}
     return tiers, signals
 
 
@@ -86,14 +87,14 @@ def collect(chains, samples, log=None):
     """Per tier (``chains``, cheapest first), the error on each sample; per (tier, signal), its value on
     each sample (for every tier but the dearest, which is never stepped up from)."""
     errors = {t: [] for t in chains}
-    values = {t: {n: [] for n in A.SIGNALS} for t in list(chains)[:-1]}  # signals of every tier but the dearest
+    values = {t: {n: [] for n in auto_tier.SIGNALS} for t in list(chains)[:-1]}  # signals of every tier but the dearest
     for i, (image, gt) in enumerate(samples):
         for t, chain in chains.items():
             out = chain(image)
             maps = {k: out[k] for k in cv.MAP_NAMES}
             errors[t].append(tier_error(maps, gt))
-            for n in A.SIGNALS if t in values else ():
-                values[t][n].append(A.signal(n, image, maps, chain))
+            for n in auto_tier.SIGNALS if t in values else ():
+                values[t][n].append(auto_tier.signal(n, image, maps, chain))
         if log and (i + 1) % 16 == 0:
             log(f"calibration: {i + 1}/{len(samples)} photos")
     return ({t: np.array(v) for t, v in errors.items()},
@@ -143,20 +144,20 @@ def calibrate(samples, chains=None, margin=MARGIN, repeat=5, log=print):
     chains = chains or {t: Chain(os.path.join(MODELS_DIR, t)) for t in installed_tiers()}
     ladder = list(chains)
     if len(ladder) < 2:
-        raise click.ClickException(f"--model auto needs two installed tiers; found {', '.join(ladder) or 'none'}")
+        raise SvbrdfError(f"--model auto needs two installed tiers; found {', '.join(ladder) or 'none'}")
     cost, sig_cost = tier_seconds(chains, repeat)
     errors, values = collect(chains, samples, log)
     steps, report = [], []
     for lo, hi in zip(ladder, ladder[1:]):
         chosen, within = choose_step(errors[lo], errors[hi], cost[lo], cost[hi], values[lo], sig_cost, margin)
-        per_signal = {n: min(cs, key=_cheapest) for n in A.SIGNALS
+        per_signal = {n: min(cs, key=_cheapest) for n in auto_tier.SIGNALS
                       if (cs := [c for c in within if c["signal"] == n and c["threshold"] is not None])}
         steps.append({k: chosen[k] for k in ("signal", "threshold", "above")})
         report.append({"from": lo, "to": hi, "chosen": chosen, "cheapest_per_signal": per_signal,
                        "correlation": {n: float(np.corrcoef(values[lo][n], errors[hi] - errors[lo])[0, 1])
-                                       for n in A.SIGNALS}})
+                                       for n in auto_tier.SIGNALS}})
     rule = {"ladder": ladder, "steps": steps}
-    levels = [A.decide(rule, [values[ladder[i]][s["signal"]][j] for i, s in enumerate(steps)])
+    levels = [auto_tier.decide(rule, [values[ladder[i]][s["signal"]][j] for i, s in enumerate(steps)])
               for j in range(len(samples))]
     auto_err = float(np.mean([errors[ladder[lv]][j] for j, lv in enumerate(levels)]))
     rule["calibration"] = {
@@ -166,7 +167,7 @@ def calibrate(samples, chains=None, margin=MARGIN, repeat=5, log=print):
         "tier_seconds_256": cost, "signal_seconds_256": sig_cost,
         "auto_error": auto_err, "tiers_taken": {t: levels.count(i) for i, t in enumerate(ladder)},
         "steps": report, "cores": os.cpu_count(), "made": time.strftime("%Y-%m-%dT%H:%M:%S"),
-        "command": f"python -m export.auto --samples {len(samples)} --margin {margin}",
+        "command": f"python -m export.auto_calibration --samples {len(samples)} --margin {margin}",
     }
     return rule
 
@@ -189,7 +190,7 @@ def evidence(rule, des19, nine=None, real=(), chains=None, log=print):
     :class:`export.benchmark.NineLights` or None; ``real``: network inputs
     without ground truth (cost and tiers only).
     """
-    auto = A.AutoModel(rule, chains=chains)
+    auto = auto_tier.AutoModel(rule, chains=chains)
     models = {t: auto.chain(t) for t in rule["ladder"]}
     models["auto"] = auto
     for m in models.values():  # warm up every session once, outside the timings
@@ -203,7 +204,7 @@ def evidence(rule, des19, nine=None, real=(), chains=None, log=print):
     cheap = rule["ladder"][0]
     for name, items in sets.items():
         row = {"photos": len(items), "error": {}, "seconds": {}, "taken": {t: 0 for t in rule["ladder"]}}
-        per_photo, signals = {}, {n: [] for n in A.SIGNALS}
+        per_photo, signals = {}, {n: [] for n in auto_tier.SIGNALS}
         for key, model in models.items():
             errs, secs = [], []
             for image, gt in items:
@@ -217,8 +218,8 @@ def evidence(rule, des19, nine=None, real=(), chains=None, log=print):
                 if key == "auto":
                     row["taken"][auto.decision["chosen"]] += 1
                 if key == cheap:
-                    for n in A.SIGNALS:
-                        signals[n].append(A.signal(n, image, maps, models[cheap]))
+                    for n in auto_tier.SIGNALS:
+                        signals[n].append(auto_tier.signal(n, image, maps, models[cheap]))
             per_photo[key] = np.array(errs)
             row["error"][key] = float(np.mean(errs)) if errs else None
             row["seconds"][key] = float(np.mean(secs))
@@ -275,7 +276,7 @@ def calibration_table(rule):
              "| step | signal | cost of the signal (s) | corr(signal, next − this tier's error) | cheapest threshold "
              "within tolerance | error | s/photo | stepped up |", "|---|---|---|---|---|---|---|---|"]
     for st in cal["steps"]:
-        for n in A.SIGNALS:
+        for n in auto_tier.SIGNALS:
             c = st["cheapest_per_signal"].get(n)
             lines.append(f"| {st['from']} → {st['to']} | {n} | {cal['signal_seconds_256'][n]:.4f} | "
                          f"{st['correlation'][n]:.2f} | " + ("none within tolerance | – | – | –" if c is None else
@@ -297,11 +298,12 @@ def calibration_table(rule):
 @click.option("--samples", default=CALIBRATION_SAMPLES, show_default=True, help="Generated calibration photos.")
 @click.option("--margin", default=MARGIN, show_default=True, help="Tolerated relative error over the best tier.")
 @click.option("--repeat", default=5, show_default=True, help="Timed runs per tier (median).")
-@click.option("--out", type=click.Path(dir_okay=False), default=A.RULE_FILE, show_default=True)
+@click.option("--out", type=click.Path(dir_okay=False), default=auto_tier.RULE_FILE, show_default=True)
 def cli(samples, margin, repeat, out):
     """Calibrate --model auto's rule on generated photos and write it."""
     torch.set_num_threads(max(1, os.cpu_count() or 1))
-    rule = calibrate(generated(samples), margin=margin, repeat=repeat, log=click.echo)
+    with command_errors():
+        rule = calibrate(generated(samples), margin=margin, repeat=repeat, log=click.echo)
     write_json(out, rule)
     click.echo(calibration_table(rule))
     click.echo(f"wrote {out}")

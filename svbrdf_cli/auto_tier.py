@@ -1,6 +1,6 @@
 """``--model auto``: per photo, the cheapest installed tier that is good enough for the scene.
 
-The rule lives in ``models/auto.json`` (written by ``python -m export.auto``,
+The rule lives in ``models/auto.json`` (written by ``python -m export.auto_calibration``,
 with the numbers it was chosen on). It is a *ladder* of tiers, cheapest first,
 and for each step up a *signal*, a *threshold* and a side (``above``: true or
 false): the photo goes through the cheapest tier; the signal is computed on
@@ -77,7 +77,7 @@ def load_rule(path=RULE_FILE):
         raise ModelError(f"--model auto steps between {', '.join(rule['ladder'])}, but {', '.join(missing)} "
                          f"is not installed; pick --model {installed_tiers()[0] if installed_tiers() else 'FOLDER'}.")
     if len(rule["steps"]) != len(rule["ladder"]) - 1 or any(s["signal"] not in SIGNALS for s in rule["steps"]):
-        raise ModelError(f"'{path}' is not a rule this version understands; re-run python -m export.auto.")
+        raise ModelError(f"'{path}' is not a rule this version understands; re-run python -m export.auto_calibration.")
     return rule
 
 

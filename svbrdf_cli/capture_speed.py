@@ -1,8 +1,8 @@
 """Capture benchmark: seconds per photo by stage, and peak memory, at several output sizes.
 
-    python -m svbrdf_cli.bench                       # 256, 1024, 2048 from a 12 MP JPEG
-    python -m svbrdf_cli.bench --sizes 256,4096 --repeat 5 --photo my.dng
-    python -m svbrdf_cli.bench --throughput 24      # svbrdf batch: local engine vs Ray, photos/s
+    python -m svbrdf_cli.capture_speed                       # 256, 1024, 2048 from a 12 MP JPEG
+    python -m svbrdf_cli.capture_speed --sizes 256,4096 --repeat 5 --photo my.dng
+    python -m svbrdf_cli.capture_speed --throughput 24      # svbrdf batch: local engine vs Ray, photos/s
 
 Each configuration runs in its own process (so peak memory is its own):
 the photo is read, cropped, exposed, run through the model chain,
@@ -14,6 +14,7 @@ upsampling, so ratios hold on any machine.
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import resource
@@ -23,7 +24,6 @@ import sys
 import tempfile
 import time
 
-import click
 
 STAGE_ORDER = ("read", "crop", "network_masks", "network_aux", "network_maps", "upsample", "write")
 
@@ -45,17 +45,17 @@ def _synthetic_photo(path, width=4000, height=3000):
 
 def _one(photo, size, repeat, upsample, model, threads):
     """In this process: run the job ``repeat`` times; returns timings and peak memory."""
-    from svbrdf_cli import capture as C
-    from svbrdf_cli.inference import load_model
+    from svbrdf_cli import pipeline
+    from svbrdf_cli.models import load_model
 
     chain = load_model(model, threads=threads)
-    opts = C.Options(size=size, upsample=upsample, force=True)
+    opts = pipeline.Options(size=size, upsample=upsample, force=True)
     runs = []
     with tempfile.TemporaryDirectory() as out:
         for _ in range(repeat + 1):  # the first run warms up onnxruntime
             t0 = time.perf_counter()
-            prepared = C.prepare(photo, opts)
-            _, rec = C.capture(prepared, chain, out, opts, model_name=model)
+            prepared = pipeline.prepare(photo, opts)
+            _, rec = pipeline.capture(prepared, chain, out, opts, model_name=model)
             t = dict(rec["timings_s"], total=time.perf_counter() - t0)
             runs.append(t)
     runs = runs[1:]
@@ -77,7 +77,7 @@ def median_seconds(fn, repeat):
 def _networks_only(model, threads, repeat):
     import numpy as np
 
-    from svbrdf_cli.inference import load_model
+    from svbrdf_cli.models import load_model
 
     chain = load_model(model, threads=threads)
     x = np.random.default_rng(0).uniform(0, 1, (256, 256, 3)).astype(np.float32)
@@ -86,10 +86,10 @@ def _networks_only(model, threads, repeat):
 
 
 def _spawn(args):
-    r = subprocess.run([sys.executable, "-m", "svbrdf_cli.bench", "--child", json.dumps(args)],
+    r = subprocess.run([sys.executable, "-m", "svbrdf_cli.capture_speed", "--child", json.dumps(args)],
                        capture_output=True, text=True)
     if r.returncode:
-        raise click.ClickException(f"benchmark child failed: {r.stderr.strip().splitlines()[-1:]}")
+        raise SystemExit(f"error: benchmark child failed: {r.stderr.strip().splitlines()[-1:]}")
     return json.loads(r.stdout.strip().splitlines()[-1])
 
 
@@ -103,7 +103,7 @@ def _throughput(count, model):
         _synthetic_photo(os.path.join(src, "p000.jpg"), 1600, 1200)
         for i in range(1, count):
             shutil.copy(os.path.join(src, "p000.jpg"), os.path.join(src, f"p{i:03d}.jpg"))
-        click.echo(f"{count} photos 1600x1200 JPEG -> 1024 px native sets with previews; model {model}; "
+        print(f"{count} photos 1600x1200 JPEG -> 1024 px native sets with previews; model {model}; "
                    f"{os.cpu_count()} cores; wall clock of the whole command (start-up included)")
         rows = []
         for engine in ("local", "ray"):
@@ -114,27 +114,37 @@ def _throughput(count, model):
             r = subprocess.run(cmd, capture_output=True, text=True)
             dt = time.perf_counter() - t0
             if r.returncode:
-                raise click.ClickException(f"{engine} engine failed: {r.stderr.strip()[-300:]}")
+                raise SystemExit(f"error: {engine} engine failed: {r.stderr.strip()[-300:]}")
             rows.append((engine, dt))
-    click.echo("| engine | seconds | photos/s | vs local |")
-    click.echo("|---|---|---|---|")
+    print("| engine | seconds | photos/s | vs local |")
+    print("|---|---|---|---|")
     for engine, dt in rows:
-        click.echo(f"| {engine} | {dt:.1f} | {count / dt:.2f} | {rows[0][1] / dt:.2f} |")
+        print(f"| {engine} | {dt:.1f} | {count / dt:.2f} | {rows[0][1] / dt:.2f} |")
 
 
-@click.command()
-@click.option("--photo", type=click.Path(exists=True, dir_okay=False), default=None,
-              help="Photo to run on (default: a synthetic 4000x3000 JPEG).")
-@click.option("--sizes", default="256,1024,2048", show_default=True, help="Output sizes (comma-separated).")
-@click.option("--repeat", default=3, show_default=True, help="Timed runs per configuration (median).")
-@click.option("--model", default="fast", show_default=True)
-@click.option("--threads", default=0, help="onnxruntime threads (0: one per core).")
-@click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None, help="Also write the figures here.")
-@click.option("--throughput", type=int, default=0,
-              help="Instead: time 'svbrdf batch' on this many 1600x1200 JPEGs, local engine vs Ray.")
-@click.option("--child", default=None, hidden=True)
-def cli(photo, sizes, repeat, model, threads, json_out, child, throughput):
+def _arguments(argv=None):
+    p = argparse.ArgumentParser(prog="python -m svbrdf_cli.capture_speed",
+                                description="Time the capture job by stage at several output sizes, with peak memory.")
+    p.add_argument("--photo", default=None, help="Photo to run on (default: a synthetic 4000x3000 JPEG).")
+    p.add_argument("--sizes", default="256,1024,2048", help="Output sizes (comma-separated; default %(default)s).")
+    p.add_argument("--repeat", type=int, default=3, help="Timed runs per configuration (median; default %(default)s).")
+    p.add_argument("--model", default="fast", help="default: %(default)s")
+    p.add_argument("--threads", type=int, default=0, help="onnxruntime threads (0: one per core).")
+    p.add_argument("--json", dest="json_out", default=None, help="Also write the figures here.")
+    p.add_argument("--throughput", type=int, default=0,
+                   help="Instead: time 'svbrdf batch' on this many 1600x1200 JPEGs, local engine vs Ray.")
+    p.add_argument("--child", default=None, help=argparse.SUPPRESS)
+    a = p.parse_args(argv)
+    if a.photo is not None and not os.path.isfile(a.photo):
+        p.error(f"--photo '{a.photo}' is not a file.")
+    return a
+
+
+def main(argv=None):
     """Time the capture job by stage at several output sizes, with peak memory."""
+    a = _arguments(argv)
+    photo, sizes, repeat, model, threads = a.photo, a.sizes, a.repeat, a.model, a.threads
+    json_out, child, throughput = a.json_out, a.child, a.throughput
     if throughput:
         return _throughput(throughput, model)
     if child:
@@ -151,7 +161,7 @@ def cli(photo, sizes, repeat, model, threads, json_out, child, throughput):
         from svbrdf_cli.ingest import load_photo
 
         h, w = load_photo(photo).linear.shape[:2]
-        click.echo(f"photo: {os.path.basename(photo)} {w}x{h}; model {model}; {os.cpu_count()} cores; "
+        print(f"photo: {os.path.basename(photo)} {w}x{h}; model {model}; {os.cpu_count()} cores; "
                    f"median of {repeat} runs after one warm-up; each row in its own process")
         base = _spawn({"photo": None, "model": model, "threads": threads, "repeat": max(repeat, 5)})
         rows = []
@@ -162,14 +172,14 @@ def cli(photo, sizes, repeat, model, threads, json_out, child, throughput):
                 rows.append((size, up, r))
     t_net = base["timings"]["total"]
     head = ["size", "upsampling"] + list(STAGE_ORDER) + ["total s", "x networks", "peak MB"]
-    click.echo("| " + " | ".join(head) + " |")
-    click.echo("|" + "---|" * len(head))
-    click.echo("| 256 | networks alone | " + " | ".join("" for _ in STAGE_ORDER)
+    print("| " + " | ".join(head) + " |")
+    print("|" + "---|" * len(head))
+    print("| 256 | networks alone | " + " | ".join("" for _ in STAGE_ORDER)
                + f" | {t_net:.3f} | 1.0 | {base['peak_rss_mb']:.0f} |")
     for size, up, r in rows:
         t = r["timings"]
         cells = [f"{t.get(k, 0):.3f}" for k in STAGE_ORDER]
-        click.echo(f"| {size} | {up} | " + " | ".join(cells) + f" | {t['total']:.3f} | {t['total'] / t_net:.1f} | "
+        print(f"| {size} | {up} | " + " | ".join(cells) + f" | {t['total']:.3f} | {t['total'] / t_net:.1f} | "
                    f"{r['peak_rss_mb']:.0f} |")
     if json_out:
         with open(json_out, "w") as f:
@@ -178,4 +188,4 @@ def cli(photo, sizes, repeat, model, threads, json_out, child, throughput):
 
 
 if __name__ == "__main__":
-    cli()
+    main()

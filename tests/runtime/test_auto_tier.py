@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from svbrdf_cli import auto as A
+from svbrdf_cli import auto_tier
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.inference import ModelError, installed_tiers
 
@@ -30,7 +30,7 @@ def _rule(*steps):
     ([{"signal": "contrast", "threshold": 0.2}, {"signal": "saturated", "threshold": 0.5}], [0.1], 0),
 ])
 def test_decide_climbs_while_each_signal_is_on_its_stepping_side(steps, values, level):
-    assert A.decide(_rule(*steps), values) == level
+    assert auto_tier.decide(_rule(*steps), values) == level
 
 
 def _photo(seed=0, size=64):
@@ -43,7 +43,7 @@ def _photo(seed=0, size=64):
 @pytest.mark.parametrize("threshold,chosen", [(None, 0), (-1.0, 1)])
 def test_auto_returns_exactly_the_chosen_tiers_maps(threshold, chosen):
     rule = {"ladder": LADDER, "steps": [{"signal": "contrast", "threshold": threshold, "above": True}]}
-    auto = A.AutoModel(rule, threads=1)
+    auto = auto_tier.AutoModel(rule, threads=1)
     img = _photo()
     out = auto(img)
     tier = LADDER[chosen]
@@ -62,26 +62,26 @@ def test_auto_returns_exactly_the_chosen_tiers_maps(threshold, chosen):
 
 
 @needs_two
-@pytest.mark.parametrize("name", list(A.SIGNALS))
+@pytest.mark.parametrize("name", list(auto_tier.SIGNALS))
 def test_signals_are_finite_numbers(name):
-    chain = A.AutoModel({"ladder": LADDER, "steps": [{"signal": name, "threshold": None}]}, threads=1).chain(LADDER[0])
+    chain = auto_tier.AutoModel({"ladder": LADDER, "steps": [{"signal": name, "threshold": None}]}, threads=1).chain(LADDER[0])
     img = _photo(1)
     maps = chain(img)
-    v = A.signal(name, img, {k: maps[k] for k in cv.MAP_NAMES}, chain)
+    v = auto_tier.signal(name, img, {k: maps[k] for k in cv.MAP_NAMES}, chain)
     assert isinstance(v, float) and np.isfinite(v) and v >= 0
 
 
 def test_a_missing_or_unusable_rule_is_a_clear_error(tmp_path):
     with pytest.raises(ModelError, match="auto.json.*missing"):
-        A.load_rule(str(tmp_path / "auto.json"))
+        auto_tier.load_rule(str(tmp_path / "auto.json"))
     p = tmp_path / "rule.json"
     p.write_text(json.dumps({"ladder": ["best"], "steps": []}))
     if "best" not in installed_tiers():
         with pytest.raises(ModelError, match="best is not installed"):
-            A.load_rule(str(p))
+            auto_tier.load_rule(str(p))
     p.write_text(json.dumps({"ladder": installed_tiers()[:1] * 2, "steps": [{"signal": "moon", "threshold": 1}]}))
-    with pytest.raises(ModelError, match="re-run python -m export.auto"):
-        A.load_rule(str(p))
+    with pytest.raises(ModelError, match="re-run python -m export.auto_calibration"):
+        auto_tier.load_rule(str(p))
 
 
 @needs_two
@@ -96,7 +96,7 @@ def test_capture_with_model_auto_records_the_tier_and_why(tmp_path):
     assert r.exit_code == 0, r.output
     rec = json.loads((tmp_path / "out" / "stone" / "material.json").read_text())
     m = rec["model"]
-    assert m["name"] == "auto" and m["tier"] == m["auto"]["chosen"] and m["tier"] in A.load_rule()["ladder"]
+    assert m["name"] == "auto" and m["tier"] == m["auto"]["chosen"] and m["tier"] in auto_tier.load_rule()["ladder"]
     assert m["sha256_16"]["maps.onnx"] and os.path.isdir(m["folder"])
     assert any(k.startswith("network_") for k in rec["timings_s"])
     assert os.path.isfile(tmp_path / "out" / "stone" / "confidence" / "normal.png")

@@ -1,8 +1,8 @@
 """Benchmark the intermediate targets: seconds per batch, beside the paper's figures.
 
-    python -m export.render.bench                     # batch 16 at 256^2 on the CPU
-    python -m export.render.bench --device cuda       # on a GPU
-    python -m export.render.bench --batch 4 --size 128 --repeat 2   # quick
+    python -m export.render.target_speed                     # batch 16 at 256^2 on the CPU
+    python -m export.render.target_speed --device cuda       # on a GPU
+    python -m export.render.target_speed --batch 4 --size 128 --repeat 2   # quick
 
 Prints the median time of each target for one batch of random maps (float32)
 and its ratio to rendering the plain flash image I, measured in the same run,
@@ -19,7 +19,7 @@ import time
 
 import torch
 
-from export.render import targets as T
+from export.render import targets
 from svbrdf_cli import conventions as cv
 
 #: Section IV-A of the paper: seconds per batch of 16 at 256^2 on an RTX 3090.
@@ -55,12 +55,12 @@ def run(batch=16, size=256, device="cpu", repeat=3, chunk=5):
     """Returns {target: seconds per batch}."""
     maps = random_maps(batch, size, device)
     jobs = {
-        "I": lambda: T.flash_image(maps),
-        "I_bf": lambda: T.bumpiness_flattened(maps),
-        "I_hr": lambda: T.highlight_removed(maps, chunk=chunk),
-        "I_hr2": lambda: T.highlight_removed(maps, high_roughness=True, chunk=chunk),
-        "M_b": lambda: T.bumpiness_mask(maps),
-        "M_h": lambda: T.highlight_mask(maps),
+        "I": lambda: targets.flash_image(maps),
+        "I_bf": lambda: targets.bumpiness_flattened(maps),
+        "I_hr": lambda: targets.highlight_removed(maps, chunk=chunk),
+        "I_hr2": lambda: targets.highlight_removed(maps, high_roughness=True, chunk=chunk),
+        "M_b": lambda: targets.bumpiness_mask(maps),
+        "M_h": lambda: targets.highlight_mask(maps),
     }
     with torch.no_grad():
         return {k: _time(fn, repeat, device) for k, fn in jobs.items()}

@@ -1,14 +1,15 @@
 """One photo in, one texture set out: ingest -> crop -> expose -> infer -> upsample -> write.
 
-:func:`capture` is the whole job for one photo; the CLI's ``capture`` and
-``batch`` commands loop over it. Every output set is written atomically (see
+:func:`capture` is the whole job for one photo; :mod:`svbrdf_cli.batch` loops
+over it for the CLI's ``capture`` and ``batch`` commands. Every output set is written atomically (see
 :mod:`svbrdf_cli.presets`): the preset's files plus ``material.json`` (what
 was done, with which model, how long it took), ``preview.png`` (the maps and
 three relit renders) and, with ``debug``, ``debug/`` (network input, masks and
 auxiliary renderings).
 
-**Resolution.** The networks run at :data:`NETWORK_SIZE` (their training
-and validation resolution). Larger outputs are made by *guided upsampling*
+**Resolution.** The networks run at :data:`NETWORK_SIZE` (their export and
+validation resolution; they were trained on 128 px crops, see each model's
+``provenance.json``). Larger outputs are made by *guided upsampling*
 (:func:`guided_upsample`): the normal and diffuse maps are regressed locally
 on the photo's brightness at network resolution, and the full-resolution
 photo's fine detail (grain, scratches, pores) is added to their bicubic
@@ -35,10 +36,12 @@ from svbrdf_cli.errors import SvbrdfError
 
 log = logging.getLogger("svbrdf")
 
-#: The networks' working resolution (trained and validated at it).
+#: The networks' working resolution (exported and validated at it; trained on 128 px crops).
 NETWORK_SIZE = 256
 #: Output sizes accepted by ``--size``.
 MIN_SIZE, MAX_SIZE = 256, 4096
+#: The most ``--exposure`` may change a photo, in stops either way (2^20: beyond any real photo's need).
+MAX_EXPOSURE_STOPS = 20.0
 #: Default output size cap: the crop's own resolution, at most this.
 DEFAULT_SIZE = 1024
 #: Guided upsampling: window radius (network pixels) and regularisation.
@@ -142,6 +145,8 @@ def guided_upsample(low, guide_low, guide_high, radius=GUIDE_RADIUS, eps=GUIDE_E
 #: Maps that take the photo's detail in guided upsampling; the others are
 #: bicubic (measured: ``python -m export.upsample_eval``, docs/capture.md).
 GUIDED_MAPS = ("normal", "diffuse")
+#: How maps reach the output size: guided by the photo (:data:`GUIDED_MAPS`), or plain bicubic.
+UPSAMPLE_METHODS = ("guided", "bicubic")
 
 
 def upsample_maps(stored, photo_low, photo_high, method="guided"):
@@ -154,7 +159,7 @@ def upsample_maps(stored, photo_low, photo_high, method="guided"):
     side = photo_high.shape[0]
     if stored["normal"].shape[0] == side:
         return dict(stored)
-    if method not in ("guided", "bicubic"):
+    if method not in UPSAMPLE_METHODS:
         raise ValueError(f"unknown upsampling method {method!r}")
     lum = np.asarray(cv.LUMA, np.float32)
     gl, gh = photo_low @ lum, photo_high @ lum

@@ -52,8 +52,18 @@ def test_render_refuses_to_overwrite(runner, mapset, tmp_path):
     out = tmp_path / "x.png"
     out.write_bytes(b"keep")
     res = runner.invoke(cli, ["render", str(mapset), "-o", str(out)])
-    assert res.exit_code == 2 and "--overwrite" in res.output
+    # a file error (exit 1), not a usage error (exit 2), naming the file and the flag
+    assert res.exit_code == 1 and "--force" in res.output and str(out) in res.output
     assert out.read_bytes() == b"keep"
+    res = runner.invoke(cli, ["render", str(mapset), "-o", str(out), "--force"])
+    assert res.exit_code == 0 and out.read_bytes() != b"keep"
+
+
+def test_render_overwrite_is_an_alias_of_force(runner, mapset, tmp_path):
+    out = tmp_path / "x.png"
+    out.write_bytes(b"keep")
+    res = runner.invoke(cli, ["render", str(mapset), "-o", str(out), "--overwrite"])
+    assert res.exit_code == 0 and out.read_bytes() != b"keep"
 
 
 def test_render_missing_map_is_one_line_error(runner, mapset, tmp_path):

@@ -26,8 +26,10 @@ import shutil
 import sys
 import tempfile
 
-from svbrdf_cli import capture as C
+from svbrdf_cli import pipeline
+from svbrdf_cli.batch import Counts, clean_partials, describe_failure, plan_inputs
 from svbrdf_cli.errors import SvbrdfError
+from svbrdf_cli.models import check_model, load_model
 
 log = logging.getLogger("svbrdf")
 
@@ -81,7 +83,7 @@ class Store:
         return self._info(stem) if self.remote else os.path.exists(os.path.join(self.output, stem))
 
     def complete(self, stem):
-        return self._info(f"{stem}/{C.RECORD}") if self.remote else C.is_complete(os.path.join(self.output, stem))
+        return self._info(f"{stem}/{pipeline.RECORD}") if self.remote else pipeline.is_complete(os.path.join(self.output, stem))
 
     def upload(self, local_folder, stem, force):
         """Copy a finished local set to ``<root>/<stem>/``, ``material.json`` last."""
@@ -93,7 +95,7 @@ class Store:
         self.fs.create_dir(dest, recursive=True)
         files = sorted(os.path.relpath(os.path.join(d, n), local_folder)
                        for d, _, names in os.walk(local_folder) for n in names)
-        files.sort(key=lambda rel: rel == C.RECORD)  # the completion marker goes last
+        files.sort(key=lambda rel: rel == pipeline.RECORD)  # the completion marker goes last
         local = pafs.LocalFileSystem()
         for rel in files:
             target = f"{dest}/{rel.replace(os.sep, '/')}"
@@ -108,22 +110,18 @@ class CaptureWorker:
     """One Ray actor: a model chain loaded once, then photos one by one (``map_batches``)."""
 
     def __init__(self, model, opts, output, threads=1):
-        from svbrdf_cli.inference import load_model
-
         self.chain = load_model(model, threads=threads)
         self.model, self.opts, self.store = model, opts, Store(output)
 
     def _one(self, path):
-        from svbrdf_cli.cli.capture import describe_failure
-
         try:
-            prepared = C.prepare(path, self.opts)
+            prepared = pipeline.prepare(path, self.opts)
             if not self.store.remote:
-                folder, rec = C.capture(prepared, self.chain, self.store.output, self.opts, model_name=self.model)
+                folder, rec = pipeline.capture(prepared, self.chain, self.store.output, self.opts, model_name=self.model)
                 return {"path": path, "folder": folder, "error": "", "seconds": sum(rec["timings_s"].values())}
             tmp = tempfile.mkdtemp(prefix="svbrdf-ray-")
             try:
-                local, rec = C.capture(prepared, self.chain, tmp, self.opts, model_name=self.model)
+                local, rec = pipeline.capture(prepared, self.chain, tmp, self.opts, model_name=self.model)
                 folder = self.store.upload(local, os.path.basename(local), self.opts.force)
             finally:
                 shutil.rmtree(tmp, ignore_errors=True)
@@ -152,9 +150,11 @@ def _silenced_fd2(active):
         os.close(saved)
 
 
-def run_ray(files, output, opts, model, address=None, workers=None, threads_per_worker=1, skip_done=True,
-            quiet=False, err=print):
-    """Run the batch on Ray; returns (done, skipped, failed) like the local engine."""
+def run_ray(files, job, address=None, workers=None, err=print):
+    """Run ``job`` (:class:`svbrdf_cli.batch.Job`) on Ray; returns :class:`svbrdf_cli.batch.Counts` like the
+    local engine. Each worker runs ``job.threads`` onnxruntime threads (0: one)."""
+    output, opts, model, quiet = job.output, job.opts, job.model, job.quiet
+    threads_per_worker = job.threads or 1
     quiet_ray = log.getEffectiveLevel() > logging.DEBUG  # Ray's own INFO lines would bury the summary
     if quiet_ray:
         # The driver's core worker logs an "E" line for every actor pool (ray-project/ray#53727) that is
@@ -168,17 +168,14 @@ def run_ray(files, output, opts, model, address=None, workers=None, threads_per_
     if quiet_ray:
         for name in ("ray", "ray.data"):
             logging.getLogger(name).setLevel(logging.ERROR if quiet else logging.WARNING)
-    from svbrdf_cli.cli.capture import _clean_partials, plan_inputs
-    from svbrdf_cli.inference import check_model
-
     store = Store(output)
     check_model(model)  # fail early, on the driver, for a model that is not installed
-    todo, skipped, failed = plan_inputs(files, output, opts, skip_done, err, store=store)
+    todo, skipped, failed = plan_inputs(files, job, err, store=store)
     if not todo:
-        return 0, skipped, failed
+        return Counts(0, skipped, failed)
     if not store.remote:
         os.makedirs(output, exist_ok=True)
-        _clean_partials(output)
+        clean_partials(output)
     started_here = not ray.is_initialized()
     if started_here:
         try:
@@ -217,4 +214,4 @@ def run_ray(files, output, opts, model, address=None, workers=None, threads_per_
             done += 1
             if not quiet:
                 log.info("%s -> %s (%.1f s)", original, r["folder"], r["seconds"])
-    return done, skipped, failed
+    return Counts(done, skipped, failed)

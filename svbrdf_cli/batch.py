@@ -1,0 +1,176 @@
+"""The batch engine: photos in, texture sets out, one bad photo never stopping the rest.
+
+``svbrdf capture`` and ``svbrdf batch`` (local engine) run :func:`run_local`; the Ray engine
+(:mod:`svbrdf_cli.ray_engine`) plans its work with the same :func:`plan_inputs` and reports
+failures with the same :func:`describe_failure`. Each photo is read, cropped and exposed while the
+previous one is in the model, written as one atomic set (:func:`svbrdf_cli.pipeline.capture`), and
+a bad photo is reported in one line and skipped.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import dataclasses
+import logging
+import os
+import shutil
+import sys
+import time
+from typing import NamedTuple
+
+from svbrdf_cli import pipeline
+from svbrdf_cli.errors import SvbrdfError
+from svbrdf_cli.models import DEFAULT_MODEL
+
+log = logging.getLogger("svbrdf")
+
+#: Files a folder input contributes (others are ignored, with a count).
+PHOTO_EXTENSIONS = frozenset(".jpg .jpeg .png .tif .tiff .exr .heic .webp".split())
+
+
+@dataclasses.dataclass
+class Job:
+    """One run of ``capture`` or ``batch``: where the sets go, which model makes them, and how each
+    photo is processed (:class:`svbrdf_cli.pipeline.Options`)."""
+
+    output: str
+    opts: pipeline.Options = dataclasses.field(default_factory=pipeline.Options)
+    model: str = DEFAULT_MODEL
+    threads: int = 0        # onnxruntime threads (0: one per core)
+    skip_done: bool = False  # skip photos whose set is complete (batch: resume); else they fail without --force
+    quiet: bool = False
+
+
+class Counts(NamedTuple):
+    """What a run did: photos converted, skipped as already complete, failed."""
+
+    done: int
+    skipped: int
+    failed: int
+
+
+def photo_extensions():
+    """Extensions a folder input contributes: :data:`PHOTO_EXTENSIONS` and camera RAW."""
+    from svbrdf_cli.ingest import RAW_EXTENSIONS
+
+    return PHOTO_EXTENSIONS | RAW_EXTENSIONS
+
+
+def collect_inputs(paths):
+    """Files given, and the photos directly inside folders given (sorted); (inputs, ignored count)."""
+    exts = photo_extensions()
+    files, ignored = [], 0
+    for p in paths:
+        if os.path.isdir(p):
+            for name in sorted(os.listdir(p)):
+                full = os.path.join(p, name)
+                if name.startswith(".") or not os.path.isfile(full):
+                    continue
+                if os.path.splitext(name)[1].lower() in exts:
+                    files.append(full)
+                else:
+                    ignored += 1
+        else:
+            files.append(p)  # named explicitly: tried whatever its extension, errors reported per file
+    return files, ignored
+
+
+def clean_partials(out):
+    """Remove temporary folders an interrupted run (killed mid-write) left in ``out``."""
+    if not os.path.isdir(out):
+        return
+    for name in os.listdir(out):
+        if name.startswith(".") and (name.endswith(".partial") or name.endswith(".old")):
+            shutil.rmtree(os.path.join(out, name), ignore_errors=True)
+
+
+def plan_inputs(files, job, err, store=None):
+    """Which inputs to run: (todo, skipped count, failed count), errors reported through ``err``.
+
+    Two inputs with the same stem (photo.jpg, photo.dng) would write the same folder: the second
+    fails. An existing set is skipped when complete and ``job.skip_done`` (batch), else it fails
+    unless ``job.opts.force``. ``store`` answers ``exists(stem)`` and ``complete(stem)`` (default:
+    local folders).
+    """
+    seen, todo, failed, skipped = {}, [], 0, 0
+    for f in files:
+        folder = pipeline.output_folder(job.output, f)
+        stem = os.path.basename(folder)
+        if folder in seen:
+            err(f"'{f}' would write to '{folder}' like '{seen[folder]}'; rename one of them.")
+            failed += 1
+            continue
+        seen[folder] = f
+        exists = store.exists(stem) if store else os.path.exists(folder)
+        if exists and not job.opts.force:
+            if job.skip_done and (store.complete(stem) if store else pipeline.is_complete(folder)):
+                log.info("skip %s: %s is complete", f, folder)
+                skipped += 1
+                continue
+            err(f"'{folder}' already exists (from '{f}'); use --force to replace it.")
+            failed += 1
+            continue
+        todo.append(f)
+    return todo, skipped, failed
+
+
+def describe_failure(f, e):
+    """One line for an exception raised while converting ``f``."""
+    if isinstance(e, SvbrdfError):
+        return str(e)
+    if isinstance(e, MemoryError):
+        return f"'{f}': out of memory; use a smaller --size or downscale the photo."
+    first = (str(e).strip().splitlines() or [""])[0]
+    return f"'{f}': unexpected {type(e).__name__}: {first} (rerun with -vv for details; please report it)."
+
+
+def run_local(files, job):
+    """Convert ``files`` in this process; returns :class:`Counts`. Errors and (unless quiet) one line
+    per converted photo go to stderr above the progress bar."""
+    from tqdm import tqdm
+
+    from svbrdf_cli.models import load_model
+
+    def err(msg):
+        tqdm.write(f"error: {msg}", file=sys.stderr)  # above the progress bar, never inside it
+
+    todo, skipped, failed = plan_inputs(files, job, err)
+    if not todo:
+        return Counts(0, skipped, failed)
+
+    chain = load_model(job.model, threads=job.threads)
+    clean_partials(job.output)
+    done = 0
+    bar = tqdm(total=len(todo), unit="photo", disable=job.quiet or len(todo) < 2, file=sys.stderr,
+               dynamic_ncols=True)
+
+    def report_failure(f, e):
+        log.debug("details", exc_info=e)
+        err(describe_failure(f, e))
+
+    # Read and crop the next photo while the current one is in the networks.
+    with concurrent.futures.ThreadPoolExecutor(max_workers=1) as pool:
+        pending = pool.submit(pipeline.prepare, todo[0], job.opts)
+        for i, f in enumerate(todo):
+            t0 = time.perf_counter()
+            try:
+                prepared = pending.result()
+            except Exception as e:  # noqa: BLE001 - one bad photo never stops a batch
+                prepared = None
+                report_failure(f, e)
+            if i + 1 < len(todo):
+                pending = pool.submit(pipeline.prepare, todo[i + 1], job.opts)
+            if prepared is not None:
+                try:
+                    folder, record = pipeline.capture(prepared, chain, job.output, job.opts, model_name=job.model)
+                    done += 1
+                    crop = record["crop"]
+                    how = crop["mode"] + (f" on the {crop['anchor']}" if crop.get("anchor") else "")
+                    if not job.quiet:
+                        tqdm.write(f"{f} -> {folder} ({record['size']}x{record['size']}, crop {how}, "
+                                   f"{time.perf_counter() - t0:.1f} s)", file=sys.stderr)
+                except Exception as e:  # noqa: BLE001
+                    report_failure(f, e)
+            bar.update(1)
+    bar.close()
+    return Counts(done, skipped, len(todo) - done + failed)

@@ -1,0 +1,49 @@
+"""``svbrdf batch``: a folder of photos, resumable, here or on a Ray cluster."""
+
+import sys
+
+import click
+
+from svbrdf_cli.batch import PHOTO_EXTENSIONS, collect_inputs, run_local
+from svbrdf_cli.cli.options import capture_options, finish
+
+ENGINES = ("local", "ray")
+
+
+@click.command("batch")
+@click.argument("folder", type=click.Path(exists=True, file_okay=False))
+@capture_options
+@click.option("--engine", type=click.Choice(ENGINES), default=ENGINES[0], show_default=True,
+              help="local: this process; ray: a Ray cluster (pip install 'svbrdf[scale]'; see docs/scale.md).")
+@click.option("--address", default=None, help="Ray cluster address (default: $RAY_ADDRESS, else a local Ray).")
+@click.option("--workers", type=click.IntRange(1, 100000), default=None,
+              help="Ray workers, each with its own model (default: one per --threads CPUs of the cluster).")
+def batch_cmd(folder, job, engine, address, workers):
+    """Convert every photo in FOLDER; rerun to resume.
+
+    Photos whose texture set is already complete in OUTPUT are skipped (so an
+    interrupted batch resumes where it stopped; --force redoes them). Sets are
+    written whole or not at all, a bad photo is reported and skipped, and the
+    exit code is 1 if any photo failed.
+
+    \b
+    Examples:
+      svbrdf batch shoot_2026-11-20/ -o textures
+      svbrdf batch shoot/ -o textures_ue --preset unreal --size 2048 -q
+      svbrdf batch /mnt/shoot -o s3://studio/textures --engine ray --address ray://head:10001
+    """
+    job.skip_done = True
+    files, ignored = collect_inputs([folder])
+    if not files:
+        raise click.UsageError(f"no photos in '{folder}' (looked for {', '.join(sorted(PHOTO_EXTENSIONS))} and RAW files).")
+    if engine == "ray":
+        from tqdm import tqdm
+
+        from svbrdf_cli.ray_engine import run_ray
+
+        counts = run_ray(files, job, address=address, workers=workers,
+                         err=lambda m: tqdm.write(f"error: {m}", file=sys.stderr))
+        finish(counts, ignored, job.quiet)
+    if "://" in job.output:
+        raise click.UsageError(f"'{job.output}' is a URI: use --engine ray, or a local folder.")
+    finish(run_local(files, job), ignored, job.quiet)

@@ -1,0 +1,62 @@
+"""What ``--model`` names, ready to run.
+
+``--model`` is ``physical`` (the maps computed from the flash physics, :mod:`svbrdf_cli.physical`), a
+shipped tier (:data:`svbrdf_cli.inference.TIERS`), ``auto`` (per photo, the cheapest tier good
+enough for it, :mod:`svbrdf_cli.auto_tier`) or a folder of exported models. Everything that runs
+maps (the local batch, the Ray workers, the speed benchmark) loads them here, so that neither
+:mod:`svbrdf_cli.inference` nor :mod:`svbrdf_cli.auto_tier` has to know the other.
+"""
+
+from __future__ import annotations
+
+import os
+
+from svbrdf_cli.inference import MODELS_DIR, TIERS, Chain, ModelError, installed_tiers
+
+#: ``--model physical``: the maps computed from the flash physics alone (:mod:`svbrdf_cli.physical`).
+PHYSICAL = "physical"
+#: What ``svbrdf capture`` runs without ``--model``: the physical estimate, until a trained
+#: model beats it on Des19 (every map) and on the real 9-light card (docs/benchmarks.md).
+DEFAULT_MODEL = PHYSICAL
+#: ``--model auto``: per photo, the cheapest installed tier good enough for it (:mod:`svbrdf_cli.auto_tier`).
+AUTO = "auto"
+
+
+def model_folder(model):
+    """``--model`` value (a tier name or a folder) -> the folder holding its ONNX files."""
+    if model in TIERS:
+        if model not in installed_tiers():
+            have = ", ".join(installed_tiers()) or "none"
+            raise ModelError(f"The '{model}' model is not installed (installed: {have}); "
+                             f"use --model {installed_tiers()[0] if installed_tiers() else 'FOLDER'}.")
+        return os.path.join(MODELS_DIR, model)
+    if os.path.isdir(model):
+        return model
+    raise ModelError(f"--model '{model}' is neither a tier ({', '.join(TIERS)}), 'auto', "
+                     "nor a folder of exported models.")
+
+
+def load_model(model, threads=0):
+    """What ``--model`` names, ready to run: a :class:`svbrdf_cli.inference.Chain`, or for ``auto`` an
+    :class:`svbrdf_cli.auto_tier.AutoModel`, for ``physical`` a
+    :class:`svbrdf_cli.physical.PhysicalModel` (same call interface)."""
+    if model == AUTO:
+        from svbrdf_cli.auto_tier import AutoModel
+
+        return AutoModel(threads=threads)
+    if model == PHYSICAL:
+        from svbrdf_cli.physical import PhysicalModel
+
+        return PhysicalModel()
+    return Chain(model_folder(model), threads=threads)
+
+
+def check_model(model):
+    """Raise :class:`svbrdf_cli.inference.ModelError` now if ``model`` cannot be loaded (cheap: no
+    session is made)."""
+    if model == AUTO:
+        from svbrdf_cli.auto_tier import load_rule
+
+        load_rule()
+    elif model != PHYSICAL:
+        model_folder(model)

@@ -1,0 +1,124 @@
+"""``svbrdf batch`` end to end: bad inputs fail one by one, accepted variants, resume after an interruption or a kill."""
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from svbrdf_cli.imageio import write_image
+from svbrdf_cli.inference import installed_tiers
+
+from .clitools import make_photo, run
+
+
+pytestmark = pytest.mark.skipif("fast" not in installed_tiers(), reason="the fast model is not installed")
+
+
+def _bad_inputs(d):
+    """Every bad-input case of the brief; returns {name: expected words in the error}."""
+    (d / "empty.jpg").write_bytes(b"")
+    (d / "notes.jpg").write_text("not an image at all\n" * 20)
+    make_photo(d / "full.png")
+    data = (d / "full.png").read_bytes()
+    (d / "truncated.png").write_bytes(data[: len(data) // 3])
+    os.remove(d / "full.png")
+    make_photo(d / "tiny.png", 20, 20)
+    # A PNG whose header claims 30000 x 30000 pixels (a decompression bomb).
+    import struct
+    import zlib
+
+    def chunk(t, b):
+        return struct.pack(">I", len(b)) + t + b + struct.pack(">I", zlib.crc32(t + b) & 0xFFFFFFFF)
+    (d / "bomb.png").write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", 30000, 30000, 8, 2, 0, 0, 0))
+                                 + chunk(b"IDAT", zlib.compress(b"\0" * 300001)) + chunk(b"IEND", b""))
+    (d / "fake.dng").write_bytes(b"II*\0" + os.urandom(4000))  # a RAW LibRaw cannot decode
+    return {"empty.jpg": "empty", "notes.jpg": "Could not read", "truncated.png": "damaged", "tiny.png": "too small",
+            "bomb.png": "Could not read", "fake.dng": "Could not decode RAW"}
+
+
+def test_bad_inputs_get_one_line_errors_and_the_batch_goes_on(tmp_path):
+    d = tmp_path / "in"
+    d.mkdir()
+    expected = _bad_inputs(d)
+    good = [make_photo(d / "good1.png", seed=1), make_photo(d / "good2.jpg", seed=2)]
+    code, out = run("batch", d, "-o", tmp_path / "out")
+    assert code == 1
+    errors = [line for line in out.splitlines() if line.startswith("error:")]
+    for name, words in expected.items():
+        line = [e for e in errors if name in e]
+        assert len(line) == 1 and words in line[0], (name, errors)
+    assert sorted(os.listdir(tmp_path / "out")) == ["good1", "good2"]  # nothing half-written, no temp folders
+    assert len(good) == 2 and "2 done" in out and f"{len(expected)} failed" in out
+
+
+def test_accepted_variants_grey_16bit_alpha_cmyk(tmp_path):
+    import OpenImageIO as oiio
+
+    d = tmp_path / "in"
+    d.mkdir()
+    make_photo(d / "p16.png", bits=16)
+    grey = np.linspace(0, 1, 300 * 300, dtype=np.float32).reshape(300, 300, 1)
+    write_image(d / "grey.png", grey)
+    write_image(d / "alpha.png", np.concatenate([np.full((300, 300, 3), 0.4, np.float32),
+                                                 np.full((300, 300, 1), 0.5, np.float32)], -1))
+    spec = oiio.ImageSpec(300, 300, 4, "uint8")
+    spec.channelnames = ("C", "M", "Y", "K")
+    spec.attribute("tiff:PhotometricInterpretation", 5)
+    out = oiio.ImageOutput.create(str(d / "cmyk.tif"))
+    assert out.open(str(d / "cmyk.tif"), spec) and out.write_image(np.full((300, 300, 4), [0, 200, 200, 0], np.uint8))
+    out.close()
+    code, text = run("batch", d, "-o", tmp_path / "out", "--no-preview")
+    assert code == 0, text
+    assert sorted(os.listdir(tmp_path / "out")) == ["alpha", "cmyk", "grey", "p16"]
+    rec = json.loads((tmp_path / "out" / "cmyk" / "material.json").read_text())
+    assert rec["input"]["bits"] == 8
+
+
+def test_batch_resumes_after_an_interruption(tmp_path):
+    d = tmp_path / "in"
+    d.mkdir()
+    for i in range(3):
+        make_photo(d / f"p{i}.png", seed=i)
+    out = tmp_path / "out"
+    # An interrupted run: p0 finished, p1 killed mid-write (its temporary folder left behind).
+    assert run("capture", d / "p0.png", "-o", out)[0] == 0
+    stamp = (out / "p0" / "material.json").read_text()
+    (out / ".p1.abc123.partial").mkdir()
+    (out / ".p1.abc123.partial" / "normal.png").write_bytes(b"half")
+    code, text = run("batch", d, "-o", out)
+    assert code == 0 and "2 done, 1 already done" in text
+    assert (out / "p0" / "material.json").read_text() == stamp  # skipped, untouched
+    assert sorted(os.listdir(out)) == ["p0", "p1", "p2"]
+    code, text = run("batch", d, "-o", out)
+    assert code == 0 and "0 done, 3 already done" in text
+    code, text = run("batch", d, "-o", out, "--force")
+    assert code == 0 and "3 done" in text
+
+
+def test_batch_interrupted_by_a_kill_leaves_only_complete_sets(tmp_path):
+    """SIGKILL a real batch process part-way: every set present is complete; a rerun finishes the rest."""
+    import signal
+    import time
+
+    d = tmp_path / "in"
+    d.mkdir()
+    for i in range(6):
+        make_photo(d / f"p{i}.png", 400, 500, seed=i)
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "svbrdf_cli.cli.main", "batch", str(d), "-o", str(out), "--size", "1024", "-q"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.time() + 120
+    while time.time() < deadline and not (out.exists() and any(not n.startswith(".") for n in os.listdir(out))):
+        assert proc.poll() is None, "the batch ended before it could be interrupted"
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    for name in os.listdir(out):
+        if not name.startswith("."):
+            assert (out / name / "material.json").exists(), name
+    assert subprocess.run(cmd).returncode == 0
+    assert sorted(n for n in os.listdir(out)) == [f"p{i}" for i in range(6)]
+

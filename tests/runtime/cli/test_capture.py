@@ -1,0 +1,117 @@
+"""``svbrdf capture`` end to end: outputs, presets, debug and confidence, existing output, usage errors, RAW, manual corners."""
+
+import json
+import os
+
+import numpy as np
+import pytest
+
+from svbrdf_cli import conventions as cv
+from svbrdf_cli.imageio import read_image
+from svbrdf_cli.inference import installed_tiers
+from svbrdf_cli.models import DEFAULT_MODEL
+
+from .clitools import SAMPLE, make_photo, run
+
+
+pytestmark = pytest.mark.skipif("fast" not in installed_tiers(), reason="the fast model is not installed")
+
+
+def test_capture_writes_the_native_set_with_record_and_preview(tmp_path):
+    code, out = run("capture", SAMPLE, "-o", tmp_path / "out", "--size", 512)
+    assert code == 0, out
+    folder = tmp_path / "out" / "glazed_tiles"
+    assert sorted(os.listdir(folder)) == sorted(["normal.png", "diffuse.png", "roughness.png", "specular.png",
+                                                  "preview.png", "material.json"])
+    rec = json.loads((folder / "material.json").read_text())
+    assert rec["crop"]["mode"] == "auto" and rec["crop"]["anchor"] == "highlight"
+    assert rec["size"] == 512 and rec["model"]["tier"] == DEFAULT_MODEL and rec["input"]["width"] == 1024
+    assert set(rec["timings_s"]) >= {"read", "crop", "network", "upsample", "write"}
+    n = read_image(folder / "normal.png")
+    assert n.shape == (512, 512, 3) and np.isfinite(n).all()
+    dec = cv.decode_normals(n)
+    assert (dec[..., 2] > 0).all() and np.allclose(np.linalg.norm(dec, axis=-1), 1, atol=0.03)
+    assert read_image(folder / "preview.png").shape == (512, 1024, 3)
+
+
+def test_debug_and_presets(tmp_path):
+    photo = make_photo(tmp_path / "wood.png")
+    code, out = run("capture", photo, "-o", tmp_path / "ue", "--preset", "unreal", "--debug", "--model", "fast")
+    assert code == 0, out
+    files = set(os.listdir(tmp_path / "ue" / "wood"))
+    assert {"BaseColor.png", "Normal.png", "ORM.png", "Height.png", "texture_set.json", "material.json",
+            "preview.png", "debug"} <= files
+    assert sorted(os.listdir(tmp_path / "ue" / "wood" / "debug")) == sorted(
+        f"{k}.png" for k in ("input", "M_b", "M_h", "I_bf", "I_hr", "I_hr2"))
+    code, out = run("capture", photo, "-o", tmp_path / "ph", "--debug", "--model", "physical")
+    assert code == 0, out
+    assert sorted(os.listdir(tmp_path / "ph" / "wood" / "debug")) == ["flash_fit.png", "input.png"]
+    code, out = run("capture", photo, "-o", tmp_path / "gl", "--preset", "gltf", "--no-preview")
+    assert code == 0 and "material.gltf" in os.listdir(tmp_path / "gl" / "wood")
+    assert "preview.png" not in os.listdir(tmp_path / "gl" / "wood")
+
+
+def test_confidence_maps(tmp_path):
+    code, out = run("capture", SAMPLE, "-o", tmp_path, "--size", 256, "--confidence", "--no-preview", "--model", "fast")
+    assert code == 0, out
+    folder = tmp_path / "glazed_tiles"
+    assert sorted(os.listdir(folder / "confidence")) == sorted(f"{k}.png" for k in cv.MAP_NAMES)
+    rec = json.loads((folder / "material.json").read_text())
+    assert rec["confidence"]["passes"] == 5 and "confidence" in rec["timings_s"]
+    for k in cv.MAP_NAMES:
+        c = read_image(folder / "confidence" / f"{k}.png")
+        assert c.shape[:2] == (256, 256) and 0 <= c.min() < c.max() <= 1
+        assert abs(float(c.mean()) - rec["confidence"]["mean"][k]) < 0.01
+
+
+def test_existing_output_is_never_overwritten_without_force(tmp_path):
+    photo = make_photo(tmp_path / "a.png")
+    assert run("capture", photo, "-o", tmp_path / "o")[0] == 0
+    before = (tmp_path / "o" / "a" / "material.json").read_text()
+    code, out = run("capture", photo, "-o", tmp_path / "o")
+    assert code == 1 and "--force" in out
+    assert (tmp_path / "o" / "a" / "material.json").read_text() == before
+    code, out = run("capture", photo, "-o", tmp_path / "o", "--force")
+    assert code == 0
+
+
+def test_usage_errors_exit_2(tmp_path):
+    assert run("capture", "-o", tmp_path)[0] == 2                              # no input
+    assert run("capture", SAMPLE, "-o", tmp_path, "--size", 100)[0] == 2       # size out of range
+    assert run("capture", SAMPLE, "-o", tmp_path, "--corners", "1,2,3")[0] == 2
+    assert run("capture", SAMPLE, "-o", tmp_path, "--preset", "svbrdf", "--format", "exr")[0] == 2
+    code, out = run("capture", SAMPLE, "-o", tmp_path, "--model", "best")
+    assert code == 1 and "not installed" in out
+
+
+def test_missing_file_is_one_failure_not_a_crash(tmp_path):
+    code, out = run("capture", tmp_path / "nope.jpg", SAMPLE, "-o", tmp_path / "o", "--size", 256)
+    assert code == 1 and "no such file" in out and (tmp_path / "o" / "glazed_tiles" / "material.json").exists()
+
+
+def test_real_raw_files_through_capture(shared_data, tmp_path):
+    """The Bayer DNG becomes a set; the GoPro GPR (VC-5, LibRaw refuses it) is one clean error."""
+    raw = shared_data / "raw"
+    dng = raw / "imageio_test_images" / "Blackmagic_PocketCinema4K_12bit.dng"
+    gpr = raw / "gopro_gpr" / "GOPR0024_HERO6.GPR"
+    code, out = run("capture", dng, gpr, "-o", tmp_path / "o", "--size", 256, "--no-preview")
+    assert code == 1
+    rec = json.loads((tmp_path / "o" / dng.stem / "material.json").read_text())
+    assert rec["input"]["kind"] == "raw" and rec["input"]["bits"] == 16 and rec["exposure"]["mode"] == "auto"
+    errors = [line for line in out.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and "GOPR0024_HERO6.GPR" in errors[0] and "DNG" in errors[0]
+    assert not (tmp_path / "o" / gpr.stem).exists()
+
+
+def test_manual_corners_exposure_and_white_balance_are_recorded(tmp_path):
+    photo = make_photo(tmp_path / "shot.png", 300, 400)
+    code, out = run("capture", photo, "-o", tmp_path / "o", "--corners", "50,40,350,45,340,290,60,280",
+                    "--exposure", "0.5", "--white-balance", "1.2,1,0.8", "--no-preview")
+    assert code == 0, out
+    rec = json.loads((tmp_path / "o" / "shot" / "material.json").read_text())
+    assert rec["crop"]["mode"] == "corners" and rec["crop"]["quad"][0] == [50.0, 40.0]
+    assert rec["exposure"] == {"mode": "manual", "stops": 0.5}
+    assert rec["white_balance"] == [1.2, 1.0, 0.8]
+    code, out = run("capture", photo, "-o", tmp_path / "o2", "--corners", "0,0,900,0,900,900,0,900")
+    assert code == 1 and "outside" in out
+
