@@ -13,19 +13,19 @@ import concurrent.futures
 import dataclasses
 import logging
 import os
-import shutil
 import sys
 import time
 from typing import NamedTuple
 
 from svbrdf_cli import pipeline
+from svbrdf_cli.atomic import clean_partials
 from svbrdf_cli.errors import SvbrdfError
 from svbrdf_cli.models import DEFAULT_MODEL
 
 log = logging.getLogger("svbrdf")
 
 #: Files a folder input contributes (others are ignored, with a count).
-PHOTO_EXTENSIONS = frozenset(".jpg .jpeg .png .tif .tiff .exr .heic .webp".split())
+PHOTO_EXTENSIONS = frozenset(".jpg .jpeg .png .tif .tiff .exr .webp".split())
 
 
 @dataclasses.dataclass
@@ -75,15 +75,6 @@ def collect_inputs(paths):
     return files, ignored
 
 
-def clean_partials(out):
-    """Remove temporary folders an interrupted run (killed mid-write) left in ``out``."""
-    if not os.path.isdir(out):
-        return
-    for name in os.listdir(out):
-        if name.startswith(".") and (name.endswith(".partial") or name.endswith(".old")):
-            shutil.rmtree(os.path.join(out, name), ignore_errors=True)
-
-
 def plan_inputs(files, job, err, store=None):
     """Which inputs to run: (todo, skipped count, failed count), errors reported through ``err``.
 
@@ -125,9 +116,11 @@ def describe_failure(f, e):
 
 
 def run_local(files, job):
-    """Convert ``files`` in this process; returns :class:`Counts`. Errors and (unless quiet) one line
-    per converted photo go to stderr above the progress bar."""
+    """Convert ``files`` in this process; returns :class:`Counts`. Errors, log lines and (unless quiet)
+    one line per converted photo go to stderr above the progress bar, which is shown only on a
+    terminal (a log file gets the lines alone)."""
     from tqdm import tqdm
+    from tqdm.contrib.logging import logging_redirect_tqdm
 
     from svbrdf_cli.models import load_model
 
@@ -141,15 +134,15 @@ def run_local(files, job):
     chain = load_model(job.model, threads=job.threads)
     clean_partials(job.output)
     done = 0
-    bar = tqdm(total=len(todo), unit="photo", disable=job.quiet or len(todo) < 2, file=sys.stderr,
-               dynamic_ncols=True)
+    bar = tqdm(total=len(todo), unit="photo", file=sys.stderr, dynamic_ncols=True,
+               disable=job.quiet or len(todo) < 2 or not sys.stderr.isatty())
 
     def report_failure(f, e):
         log.debug("details", exc_info=e)
         err(describe_failure(f, e))
 
     # Read and crop the next photo while the current one is in the networks.
-    with concurrent.futures.ThreadPoolExecutor(max_workers=1) as pool:
+    with concurrent.futures.ThreadPoolExecutor(max_workers=1) as pool, logging_redirect_tqdm():
         pending = pool.submit(pipeline.prepare, todo[0], job.opts)
         for i, f in enumerate(todo):
             t0 = time.perf_counter()

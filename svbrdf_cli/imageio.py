@@ -62,7 +62,7 @@ def read_image(path):
     return pixels
 
 
-def write_image(path, pixels, bits=8):
+def write_image(path, pixels, bits=8, colour=True):
     """Write an image atomically.
 
     Args:
@@ -70,6 +70,9 @@ def write_image(path, pixels, bits=8):
         pixels: (H, W) or (H, W, C) float array in [0, 1] (clipped for
             integer formats).
         bits: 8 or 16 for integer formats, 32 for float (EXR/TIFF).
+        colour: an sRGB-encoded colour image (PNG: sRGB chunk); False for
+            data (normals, roughness, masks, height), written untagged so
+            that no viewer or engine applies a colour transform to it.
 
     Raises:
         ImageWriteError: the image could not be written.
@@ -86,7 +89,11 @@ def write_image(path, pixels, bits=8):
     h, w, c = a.shape
     folder = os.path.dirname(os.path.abspath(path))
     ext = os.path.splitext(path)[1]
-    fd, tmp = tempfile.mkstemp(prefix=".svbrdf-", suffix=ext, dir=folder)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=".svbrdf-", suffix=ext, dir=folder)
+    except OSError as e:
+        raise ImageWriteError(f"Could not write '{path}': {e.strerror} ('{folder}'). "
+                              "Check that the folder exists and is writable.") from None
     os.close(fd)
     try:
         out = oiio.ImageOutput.create(tmp)
@@ -96,6 +103,8 @@ def write_image(path, pixels, bits=8):
         # RGBA in memory is written as given: OpenImageIO would otherwise
         # treat it as premultiplied and divide by alpha (a mask map's A is data).
         spec.attribute("oiio:UnassociatedAlpha", 1)
+        if not colour:
+            spec.attribute("oiio:ColorSpace", "Raw")  # PNG: no sRGB, gAMA or cHRM chunk
         ok = out.open(tmp, spec) and out.write_image(a)
         out.close()
         if not ok:

@@ -43,7 +43,13 @@ def _session(path, threads):
     if threads:
         opts.intra_op_num_threads = threads
     providers = [p for p in ("CUDAExecutionProvider", "CPUExecutionProvider") if p in ort.get_available_providers()]
-    return ort.InferenceSession(path, sess_options=opts, providers=providers)
+    try:
+        return ort.InferenceSession(path, sess_options=opts, providers=providers)
+    except Exception as e:  # noqa: BLE001 - onnxruntime raises its own unexported types
+        why = (str(e).strip().splitlines() or [type(e).__name__])[0]
+        why = why.split(" : ")[-1] if " : " in why else why
+        raise ModelError(f"Could not load the model '{path}': {why}. Re-export it (python -m export.onnx_export) "
+                         "or use --model physical.") from None
 
 
 def model_stages(folder):

@@ -15,13 +15,18 @@ take the photo exposed, clipped and encoded as training images are
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import logging
 import os
+import tempfile
 
 import numpy as np
 
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.errors import ImageReadError
+
+log = logging.getLogger("svbrdf")
 
 RAW_EXTENSIONS = frozenset(
     ".dng .nef .nrw .cr2 .cr3 .crw .arw .srf .sr2 .raf .rw2 .orf .pef .srw .gpr .3fr .iiq .erf .kdc .mos "
@@ -58,9 +63,19 @@ def load_photo(path, white_balance=None):
         raise ImageReadError(f"Could not read '{path}': the file is empty. Copy it from the camera again.")
     ext = os.path.splitext(path)[1].lower()
     photo = _load_raw(path) if ext in RAW_EXTENSIONS else _load_image(path)
+    _check_exposed(path, photo.linear)
     if white_balance is not None:
         photo.linear = photo.linear * np.asarray(white_balance, np.float32).reshape(1, 1, 3)
     return photo
+
+
+def _check_exposed(path, linear):
+    """Refuse a photo that is black (nothing to measure) or white everywhere (all clipped)."""
+    if float(linear.max()) <= cv.srgb_to_linear(np.float32(BLACK_LEVEL)):
+        raise ImageReadError(f"Could not use '{path}': the photo is black. Take it again with the flash on.")
+    if float(linear.min()) >= cv.srgb_to_linear(np.float32(WHITE_LEVEL)):
+        raise ImageReadError(f"Could not use '{path}': the photo is white (overexposed everywhere). Take it "
+                             "again with less exposure, or from a little further away.")
 
 
 def encode_for_network(linear):
@@ -85,32 +100,233 @@ def _load_raw(path):
     return Photo(rgb.astype(np.float32) / 65535.0, path, "raw", 16)
 
 
+#: Photos over this many pixels are decoded at a reduced size (halved until under it: JPEG by its
+#: DCT scaling, other formats strip by strip with an area filter), so that memory stays bounded
+#: whatever the file declares. 16 MP keeps a 4096 px map's crop (a 4:3 photo's short side is 3464 px
+#: at 16 MP) within 20% of its full resolution.
+DECODE_MAX_PIXELS = 16_000_000
+#: Rows decoded at once by the strip reader, as a budget in bytes of float32 samples.
+STRIP_BYTES = 64 << 20
+#: A JPEG that holds fewer bytes than its declared pixels / this is a header bomb or damaged: even a
+#: flat grey JPEG needs about a bit per 8x8 block (0.002 bytes a pixel).
+JPEG_MIN_PIXELS_PER_BYTE = 2000
+#: Brightness (encoded, 0-1) under which a whole photo counts as black, over which as white.
+BLACK_LEVEL, WHITE_LEVEL = 2.0 / 255.0, 253.0 / 255.0
+#: Alpha under which a pixel counts as transparent.
+TRANSPARENT = 0.5
+
+_MAGIC = {b"\xff\xd8\xff": "jpeg", b"\x89PNG\r\n\x1a\n": "png"}
+_HEIF_BRANDS = (b"heic", b"heix", b"hevc", b"hevx", b"heim", b"heis", b"mif1", b"msf1", b"avif")
+
+
+def _sniff(path):
+    """The file's format from its first bytes: "jpeg", "png", "heif" or None (let OpenImageIO decide)."""
+    with open(path, "rb") as f:
+        head = f.read(16)
+    for magic, kind in _MAGIC.items():
+        if head.startswith(magic):
+            return kind
+    return "heif" if head[4:8] == b"ftyp" and head[8:12] in _HEIF_BRANDS else None
+
+
+def _truncated(path, kind):
+    """Whether a JPEG or PNG ends before its image does: no EOI marker after the last scan (JPEG), no
+    IEND chunk at the end (PNG). Decoders fill a cut image with grey and carry on; we refuse it."""
+    import mmap
+
+    with open(path, "rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as m:
+        if kind == "png":
+            return m.rfind(b"IEND", max(0, len(m) - 64)) < 0
+        if kind == "jpeg":
+            sos = m.rfind(b"\xff\xda")
+            return sos < 0 or m.find(b"\xff\xd9", sos) < 0
+    return False
+
+
+@contextlib.contextmanager
+def _openable(path):
+    """A name OpenImageIO and OpenCV can open for ``path``: itself, or for a name that is not valid
+    UTF-8 (which both libraries mangle) a link to it with a plain name in a temporary folder."""
+    try:
+        path.encode("utf-8")
+        yield path
+        return
+    except UnicodeEncodeError:
+        pass
+    with tempfile.TemporaryDirectory(prefix="svbrdf-") as tmp:
+        link = os.path.join(tmp, "photo" + os.path.splitext(path)[1].encode("utf-8", "replace").decode("ascii", "replace"))
+        os.symlink(os.path.abspath(path), link)
+        yield link
+
+
+def _orient(a, orientation):
+    """Apply an EXIF orientation (1-8) to an (H, W, ...) array: what the camera meant to show."""
+    if orientation in (5, 6, 7, 8):
+        a = a.swapaxes(0, 1)
+    flip = {2: (False, True), 3: (True, True), 4: (True, False), 6: (False, True), 7: (True, True),
+            8: (True, False)}.get(orientation, (False, False))
+    if flip[0]:
+        a = a[::-1]
+    if flip[1]:
+        a = a[:, ::-1]
+    return a
+
+
+def _reduction(w, h):
+    """The power of two the photo is decoded at a fraction of (1 when it fits :data:`DECODE_MAX_PIXELS`)."""
+    f = 1
+    while (w // f) * (h // f) > DECODE_MAX_PIXELS:
+        f *= 2
+    return f
+
+
+def _decode_jpeg_reduced(path, factor):
+    """A large JPEG decoded at 1/``factor`` by libjpeg's DCT scaling (OpenCV; EXIF orientation applied):
+    (H, W, 3) uint8 RGB."""
+    import cv2
+
+    flags = {2: cv2.IMREAD_REDUCED_COLOR_2, 4: cv2.IMREAD_REDUCED_COLOR_4}.get(factor, cv2.IMREAD_REDUCED_COLOR_8)
+    bgr = cv2.imread(path, flags)
+    if bgr is None:
+        return None
+    if factor > 8:
+        h, w = bgr.shape[:2]
+        bgr = cv2.resize(bgr, (max(1, w * 8 // factor), max(1, h * 8 // factor)), interpolation=cv2.INTER_AREA)
+    return np.ascontiguousarray(bgr[..., ::-1])
+
+
+def _decode_strips(inp, spec, factor):
+    """Decode ``inp`` a few rows at a time, each strip averaged over ``factor`` x ``factor`` blocks:
+    (H // factor, W // factor, C) float32 as stored (integers scaled to 0-1), never the whole image at
+    full size."""
+    w, h, c = spec.width, spec.height, spec.nchannels
+    oh, ow = h // factor, w // factor
+    out = np.empty((oh, ow, c), np.float32)
+    rows = max(factor, STRIP_BYTES // max(1, w * c * 4) // factor * factor)
+    for y0 in range(0, oh * factor, rows):
+        y1 = min(y0 + rows, oh * factor)
+        px = inp.read_scanlines(0, 0, spec.y + y0, spec.y + y1, 0, 0, c, "float")
+        if px is None:
+            return None
+        px = np.asarray(px, np.float32).reshape(y1 - y0, w, c)
+        if factor > 1:
+            px = px[:, :ow * factor].reshape((y1 - y0) // factor, factor, ow, factor, c).mean((1, 3))
+        out[y0 // factor:y1 // factor] = px
+    return out
+
+
 def _load_image(path):
     import OpenImageIO as oiio
 
-    buf = oiio.ImageBuf(path)
-    if buf.has_error:
-        why = (buf.geterror().strip().splitlines() or ["unknown format"])[0]
-        raise ImageReadError(f"Could not read '{path}': {why}. "
-                             "Use a JPEG, PNG, TIFF, EXR or camera RAW file.")
-    spec = buf.spec()
-    if spec.width * spec.height > MAX_PIXELS:
-        raise ImageReadError(f"Could not read '{path}': {spec.width}x{spec.height} is over "
-                             f"{MAX_PIXELS // 1_000_000} MP. Downscale it first.")
-    if spec.width < MIN_SIDE or spec.height < MIN_SIDE:
-        raise ImageReadError(f"Could not use '{path}': {spec.width}x{spec.height} is too small; "
-                             f"use a photo at least {MIN_SIDE} pixels on each side (256 or more for useful maps).")
-    if not buf.read(force=True):
-        why = (buf.geterror().strip().splitlines() or ["truncated data"])[0]
-        raise ImageReadError(f"Could not decode '{path}': {why}. The file may be damaged; export it again.")
-    buf = oiio.ImageBufAlgo.reorient(buf)  # EXIF orientation
-    pixels = buf.get_pixels(oiio.FLOAT)
-    px = np.asarray(pixels, np.float32)
-    px = px[..., None] if px.ndim == 2 else px
+    kind = _sniff(path)
+    if kind == "heif":
+        raise ImageReadError(f"Could not read '{path}': HEIC/HEIF photos are not supported. Export it as JPEG "
+                             "(iPhone: Settings > Camera > Formats > Most Compatible).")
+    if kind in ("jpeg", "png") and _truncated(path, kind):
+        raise ImageReadError(f"Could not read '{path}': the file is truncated (its end is missing). "
+                             "Copy it from the camera again.")
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)  # colour as stored, alpha apart (never premultiplied)
+    with _openable(path) as name:
+        inp = oiio.ImageInput.open(name, config)
+        if inp is None:
+            why = (oiio.geterror().strip().splitlines() or ["unknown format"])[0]
+            raise ImageReadError(f"Could not read '{path}': {why}. Use a JPEG, PNG, TIFF, EXR or camera RAW file.")
+        try:
+            spec = inp.spec()
+            w, h = spec.width, spec.height
+            _check_size(path, kind, w, h)
+            factor = _reduction(w, h)
+            orientation = spec.get_int_attribute("Orientation", 1)
+            fmt = str(spec.format)
+            floating = fmt in ("half", "float", "double")
+            bits = {"uint8": 8, "uint16": 16, "half": 16, "float": 32}.get(fmt, 8)
+            if kind == "jpeg" and factor > 1:
+                inp.close()
+                inp = None
+                rgb = _decode_jpeg_reduced(name, factor)  # oriented by OpenCV
+                if rgb is None:
+                    raise ImageReadError(f"Could not decode '{path}'. The file may be damaged; export it again.")
+                rgb, alpha, orientation, bits, floating = _SRGB8_TO_LINEAR[rgb], None, 1, 8, None
+            else:
+                px = _decode_strips(inp, spec, factor)
+                if px is None:
+                    why = (oiio.geterror().strip().splitlines() or ["truncated data"])[0]
+                    raise ImageReadError(f"Could not decode '{path}': {why}. The file may be damaged; export it again.")
+                rgb, alpha = _channels(px, spec)
+                del px
+        finally:
+            if inp is not None:
+                inp.close()
+    if factor > 1:
+        log.info("'%s' is %dx%d: decoded at 1/%d (%dx%d)", path, w, h, factor, w // factor, h // factor)
+    if alpha is not None:
+        rgb = _opaque_region(path, rgb, alpha)
+    rgb = np.ascontiguousarray(_orient(rgb, orientation))
+    if floating:
+        _repair_non_finite(path, rgb)
+        np.maximum(rgb, 0.0, out=rgb)
+    elif floating is not None:  # (None: decoded to linear already)
+        _srgb_to_linear_inplace(rgb)
+    return Photo(rgb, path, "linear" if floating else "encoded", bits)
+
+
+def _channels(px, spec):
+    """(H, W, C) decoded samples -> (RGB, alpha or None): grey repeated, extra channels dropped (CMYK
+    files arrive as RGB: OpenImageIO converts them)."""
     c = px.shape[-1]
-    px = np.repeat(px[..., :1], 3, -1) if c < 3 else px[..., :3]
-    fmt = str(spec.format)
-    floating = fmt in ("half", "float", "double")
-    bits = {"uint8": 8, "uint16": 16, "half": 16, "float": 32}.get(fmt, 8)
-    linear = np.maximum(px, 0.0) if floating else cv.srgb_to_linear(px)
-    return Photo(np.ascontiguousarray(linear, dtype=np.float32), path, "linear" if floating else "encoded", bits)
+    rgb = np.repeat(px[..., :1], 3, -1) if c < 3 else np.ascontiguousarray(px[..., :3])
+    named = spec.channelnames[c - 1] in ("A", "Alpha", "alpha") if c in (2, 4) else False
+    return rgb, (px[..., c - 1] if named and spec.alpha_channel == c - 1 else None)
+
+
+def _check_size(path, kind, w, h):
+    """Refuse what no decode should be tried on: too many pixels, too few, or a JPEG far too small for
+    the size it declares (a header bomb)."""
+    if w * h > MAX_PIXELS:
+        raise ImageReadError(f"Could not read '{path}': {w}x{h} is over {MAX_PIXELS // 1_000_000} MP. "
+                             "Downscale it first.")
+    if w < MIN_SIDE or h < MIN_SIDE:
+        raise ImageReadError(f"Could not use '{path}': {w}x{h} is too small; "
+                             f"use a photo at least {MIN_SIDE} pixels on each side (256 or more for useful maps).")
+    size = os.path.getsize(path)
+    if kind == "jpeg" and size * JPEG_MIN_PIXELS_PER_BYTE < w * h:
+        raise ImageReadError(f"Could not read '{path}': it declares {w}x{h} pixels but holds only {size // 1024} KB; "
+                             "the file is damaged. Export it again.")
+
+
+def _opaque_region(path, rgb, alpha):
+    """The photo cropped to its opaque part when transparency only surrounds it; refused when the
+    picture itself has transparent holes (they hold no colour: they would be baked into every map)."""
+    clear = alpha < TRANSPARENT
+    if not clear.any():
+        return rgb
+    if clear.all():
+        raise ImageReadError(f"Could not use '{path}': it is fully transparent.")
+    ys, xs = np.flatnonzero(~clear.all(1)), np.flatnonzero(~clear.all(0))
+    y0, y1, x0, x1 = int(ys[0]), int(ys[-1]) + 1, int(xs[0]), int(xs[-1]) + 1
+    holes = float(clear[y0:y1, x0:x1].mean())
+    if holes > 0.001:
+        raise ImageReadError(f"Could not use '{path}': {holes:.1%} of the picture is transparent, and transparent "
+                             "pixels hold no colour. Flatten it onto its background or crop the transparent part out.")
+    log.warning("'%s': using its opaque %dx%d region (the rest is transparent)", path, x1 - x0, y1 - y0)
+    return rgb[y0:y1, x0:x1]
+
+
+def _repair_non_finite(path, rgb):
+    """NaN and infinite samples (a float file's broken pixels) set to 0, with a warning."""
+    bad = ~np.isfinite(rgb)
+    if bad.any():
+        n = int(bad.any(-1).sum())
+        rgb[bad] = 0.0
+        log.warning("'%s': %d pixel%s not numbers (NaN or infinite); set to black", path, n,
+                    " was" if n == 1 else "s were")
+
+
+def _srgb_to_linear_inplace(rgb, rows=256):
+    """sRGB decoding a few rows at a time (no full-size temporaries)."""
+    for y in range(0, rgb.shape[0], rows):
+        rgb[y:y + rows] = cv.srgb_to_linear(rgb[y:y + rows])
+
+
+_SRGB8_TO_LINEAR = cv.srgb_to_linear(np.arange(256, dtype=np.float32) / np.float32(255)).astype(np.float32)

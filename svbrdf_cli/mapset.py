@@ -83,4 +83,4 @@ def write_map_set(folder, maps, bits=8):
     """Write linear maps as a native map set (PNG, Des18 encoding)."""
     os.makedirs(folder, exist_ok=True)
     for name, img in linear_to_stored(maps).items():
-        write_image(os.path.join(folder, name + ".png"), img, bits=bits)
+        write_image(os.path.join(folder, name + ".png"), img, bits=bits, colour=name in ("diffuse", "specular"))

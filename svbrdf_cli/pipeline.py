@@ -90,7 +90,7 @@ def auto_exposure_gain(linear, target=cv.AUTO_EXPOSURE_MEAN):
     lo, hi = -12.0, 12.0
     flat = linear.reshape(-1, 3)[:: max(1, linear.size // 3 // 65536)]
     if float(flat.max()) <= 0:
-        raise SvbrdfError("the photo is black")
+        raise SvbrdfError("the crop is black")
     for _ in range(30):
         mid = (lo + hi) / 2
         if cv.image_to_encoded(flat * np.float32(2.0 ** mid)).mean() < target:
@@ -274,7 +274,10 @@ def prepare(path, opts):
         raise rectify.CropError(f"Could not crop '{path}': the crop is only {c.image.shape[0]} px wide; "
                                 "use a larger region or a sharper photo.")
     small = resize(c.image, NETWORK_SIZE)
-    gain = opts.exposure if opts.exposure is not None else auto_exposure_gain(small)
+    try:
+        gain = opts.exposure if opts.exposure is not None else auto_exposure_gain(small)
+    except SvbrdfError as e:
+        raise SvbrdfError(f"Could not expose '{path}': {e}; crop a part the flash lights (--corners).") from None
     t2 = time.perf_counter()
     return Prepared(os.fspath(path), photo, c, small, float(gain), {"read": t1 - t0, "crop": t2 - t1})
 
@@ -339,7 +342,7 @@ def capture(prepared, chain, out_root, opts, model_name="fast"):
         if conf is not None:
             os.makedirs(os.path.join(tmp, "confidence"))
             for k, v in conf.items():
-                write_image(os.path.join(tmp, "confidence", f"{k}.png"), v[..., None])
+                write_image(os.path.join(tmp, "confidence", f"{k}.png"), v[..., None], colour=False)
                 names.append(f"confidence/{k}.png")
         if opts.debug:
             os.makedirs(os.path.join(tmp, "debug"))
@@ -359,7 +362,8 @@ def capture(prepared, chain, out_root, opts, model_name="fast"):
         record.update(rec)
         return names + [RECORD]
 
-    write_preset(opts.preset, folder, maps, bits=opts.bits, fmt=opts.fmt, force=opts.force, extra=extra)
+    write_preset(opts.preset, folder, maps, bits=opts.bits, fmt=opts.fmt, force=opts.force, extra=extra,
+                 protect=(p.path,))
     return folder, record
 
 

@@ -48,7 +48,7 @@ normals with Frankot-Chellappa (:func:`normals_to_height`).
 Sets are written atomically: every file goes into a hidden sibling folder that
 is renamed into place once complete, so a failure never leaves a half-written
 set (or the temporary folder) behind, and an existing set is only replaced
-with ``force=True``.
+with ``force=True`` when it is a set this tool wrote (:mod:`svbrdf_cli.atomic`).
 """
 
 from __future__ import annotations
@@ -58,15 +58,14 @@ import json
 import logging
 import os
 import re
-import shutil
-import tempfile
 
 import numpy as np
 
 from svbrdf_cli import __version__
 from svbrdf_cli import conventions as cv
 from svbrdf_cli import imageio
-from svbrdf_cli.errors import ImageWriteError, MapSetError
+from svbrdf_cli.atomic import write_set
+from svbrdf_cli.errors import MapSetError
 
 log = logging.getLogger("svbrdf")
 
@@ -245,58 +244,6 @@ def _check_options(bits, fmt, png_only=None):
         raise ValueError(f"The {png_only} preset writes PNG only; got fmt={fmt!r}.")
 
 
-def _write_set(folder, write_files, force, extra=None):
-    """Run ``write_files(tmp_folder) -> [names]`` and move the result to ``folder``.
-
-    ``extra(tmp_folder) -> [names]``, if given, runs after ``write_files`` and
-    adds files of its own (a capture's preview and record) to the same set.
-
-    The files go into a hidden temporary sibling of ``folder``; only when all
-    are written is it renamed into place. With ``force`` an existing
-    ``folder`` is renamed away first and deleted once the new set is in.
-
-    Returns:
-        Paths of the written files inside ``folder``.
-    """
-    folder = os.path.abspath(os.fspath(folder))
-    parent, name = os.path.split(folder)
-    if os.path.exists(folder):
-        if not os.path.isdir(folder):
-            raise ImageWriteError(f"'{folder}' is a file; choose a folder name for the texture set.")
-        if not force:
-            raise ImageWriteError(f"'{folder}' already exists; choose another folder or replace it with --force.")
-    try:
-        os.makedirs(parent, exist_ok=True)
-        tmp = tempfile.mkdtemp(prefix=f".{name}.", suffix=".partial", dir=parent)
-    except OSError as e:
-        raise ImageWriteError(f"Could not create a folder in '{parent}': {e.strerror}. Check the path and permissions.") from e
-    old = None
-    try:
-        names = write_files(tmp)
-        if extra is not None:
-            names = names + extra(tmp)
-        os.chmod(tmp, 0o777 & ~imageio.umask())  # mkdtemp makes it 0700
-        if os.path.exists(folder):
-            old = tmp[: -len(".partial")] + ".old"
-            os.rename(folder, old)
-        try:
-            os.rename(tmp, folder)
-        except OSError:
-            if old is not None:
-                os.rename(old, folder)
-                old = None
-            raise
-    except OSError as e:
-        raise ImageWriteError(f"Could not write the texture set '{folder}': {e.strerror or e}. "
-                              "Check the path and free space.") from e
-    finally:
-        if os.path.isdir(tmp):
-            shutil.rmtree(tmp, ignore_errors=True)
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
-    return [os.path.join(folder, n) for n in names]
-
-
 class _Files:
     """Collects the images of one set in a temporary folder, plus their roles."""
 
@@ -330,7 +277,7 @@ class _Files:
 
     def _write(self, name, pixels, bits, role, space):
         path = os.path.join(self.tmp, name)
-        imageio.write_image(path, pixels, bits=bits)
+        imageio.write_image(path, pixels, bits=bits, colour=space == "sRGB")
         self.names.append(name)
         self.meta["files"][name] = {"role": role, "colour_space": space, "bits": bits}
 
@@ -358,8 +305,9 @@ def _check_maps(maps):
 # Presets
 # --------------------------------------------------------------------------
 
-def write_svbrdf(folder, maps, *, bits=8, fmt="png", force=False, extra=None):
-    """Native set: exactly ``normal.png diffuse.png roughness.png specular.png``.
+def write_svbrdf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=()):
+    """Native set: ``normal.png diffuse.png roughness.png specular.png`` and
+    ``texture_set.json`` (their roles and encodings).
 
     Written by :func:`svbrdf_cli.mapset.write_map_set` in the Des18 encoding
     (benchmarks and ``svbrdf render`` read it back). PNG only, no height.
@@ -372,7 +320,7 @@ def write_svbrdf(folder, maps, *, bits=8, fmt="png", force=False, extra=None):
         force: replace an existing folder.
 
     Returns:
-        List of the four written paths.
+        List of the written paths.
     """
     from svbrdf_cli import mapset
 
@@ -381,12 +329,18 @@ def write_svbrdf(folder, maps, *, bits=8, fmt="png", force=False, extra=None):
 
     def files(tmp):
         mapset.write_map_set(tmp, maps, bits=bits)
-        return [n + ".png" for n in cv.MAP_NAMES]
+        f = _Files(tmp, bits, fmt, "svbrdf", "OpenGL (+Y up)")
+        for name, role in zip(cv.MAP_NAMES, ("normal", "diffuse albedo (stored^2.2 = linear)", "roughness",
+                                              "specular F0 (stored^2.2 = linear)")):
+            space = "sRGB" if name in ("diffuse", "specular") else "linear"
+            f.names.append(name + ".png")
+            f.meta["files"][name + ".png"] = {"role": role, "colour_space": space, "bits": bits}
+        return f.finish()
 
-    return _write_set(folder, files, force, extra)
+    return write_set(folder, files, force, extra, protect)
 
 
-def write_gltf(folder, maps, *, bits=8, fmt="png", force=False, extra=None):
+def write_gltf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=()):
     """glTF 2.0 metallic-roughness set plus ``material.gltf`` (one textured quad).
 
     ``baseColor.png`` (sRGB), ``metallicRoughness.png`` (linear; R = 1 (no
@@ -416,10 +370,10 @@ def write_gltf(folder, maps, *, bits=8, fmt="png", force=False, extra=None):
             out.write("\n")
         return f.finish() + ["material.gltf"]
 
-    return _write_set(folder, files, force, extra)
+    return write_set(folder, files, force, extra, protect)
 
 
-def write_unreal(folder, maps, *, bits=8, fmt="png", force=False, extra=None):
+def write_unreal(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=()):
     """Unreal Engine set: ``BaseColor`` (sRGB), ``Normal`` (DirectX), ``ORM``, ``Height``.
 
     ORM is linear (import with sRGB off): R = ambient occlusion (1: none
@@ -442,10 +396,10 @@ def write_unreal(folder, maps, *, bits=8, fmt="png", force=False, extra=None):
         f.height("Height", maps["normal"])
         return f.finish()
 
-    return _write_set(folder, files, force, extra)
+    return write_set(folder, files, force, extra, protect)
 
 
-def write_unity_hdrp(folder, maps, *, bits=8, fmt="png", force=False, extra=None):
+def write_unity_hdrp(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=()):
     """Unity HDRP Lit set: ``BaseMap`` (sRGB), ``MaskMap`` (RGBA), ``Normal``, ``Height``.
 
     MaskMap is linear (import with sRGB off): R = metallic, G = AO (1),
@@ -469,7 +423,7 @@ def write_unity_hdrp(folder, maps, *, bits=8, fmt="png", force=False, extra=None
         f.height("Height", maps["normal"])
         return f.finish()
 
-    return _write_set(folder, files, force, extra)
+    return write_set(folder, files, force, extra, protect)
 
 
 #: Node Wrangler's default Principled Texture Setup tags (see the module docstring).
@@ -499,7 +453,7 @@ def blender_prefix(folder):
     return prefix
 
 
-def write_blender(folder, maps, *, bits=8, fmt="png", force=False, extra=None):
+def write_blender(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=()):
     """Blender set, named for Node Wrangler's Principled Texture Setup (Ctrl+Shift+T).
 
     ``<name>_BaseColor.png`` (sRGB), ``<name>_Roughness`` and
@@ -525,7 +479,7 @@ def write_blender(folder, maps, *, bits=8, fmt="png", force=False, extra=None):
         f.height(f"{prefix}_Height", maps["normal"])
         return f.finish()
 
-    return _write_set(folder, files, force, extra)
+    return write_set(folder, files, force, extra, protect)
 
 
 #: Preset name -> writer.
@@ -538,8 +492,10 @@ PNG_ONLY_PRESETS = ("svbrdf", "gltf")
 def write_preset(preset, folder, maps, **kwargs):
     """Write ``maps`` as the texture set ``preset`` (a key of :data:`PRESETS`).
 
-    Keyword arguments: ``bits``, ``fmt``, ``force`` and ``extra`` (a function
-    of the temporary folder that writes more files into the same atomic set).
+    Keyword arguments: ``bits``, ``fmt``, ``force``, ``extra`` (a function
+    of the temporary folder that writes more files into the same atomic set)
+    and ``protect`` (paths the run reads: a folder holding one is never
+    replaced; see :func:`svbrdf_cli.atomic.write_set`).
     """
     try:
         writer = PRESETS[preset]

@@ -27,7 +27,8 @@ import sys
 import tempfile
 
 from svbrdf_cli import pipeline
-from svbrdf_cli.batch import Counts, clean_partials, describe_failure, plan_inputs
+from svbrdf_cli.atomic import clean_partials
+from svbrdf_cli.batch import Counts, describe_failure, plan_inputs
 from svbrdf_cli.errors import SvbrdfError
 from svbrdf_cli.models import check_model, load_model
 

@@ -36,6 +36,6 @@ def export_cmd(mapset, output, preset, bits, fmt, force):
 
     check_format(preset, fmt)
     maps = read_map_set(mapset)
-    paths = write_preset(preset, output, maps, bits=int(bits), fmt=fmt, force=force)
+    paths = write_preset(preset, output, maps, bits=int(bits), fmt=fmt, force=force, protect=(mapset,))
     h, w = maps["normal"].shape[:2]
     click.echo(f"wrote {output} ({preset}, {len(paths)} files, {w}x{h})", err=True)

@@ -11,7 +11,7 @@ import click
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.batch import Job
 from svbrdf_cli.models import DEFAULT_MODEL
-from svbrdf_cli.cli.values import corners, exposure, numbers
+from svbrdf_cli.cli.values import corners, exposure, light, numbers
 from svbrdf_cli.pipeline import MAX_SIZE, MIN_SIZE, UPSAMPLE_METHODS, Options
 from svbrdf_cli.presets import FORMATS, PNG_BITS, PNG_ONLY_PRESETS, PRESETS
 from svbrdf_cli.rectify import CROP_MODES
@@ -32,7 +32,7 @@ def set_verbosity(quiet=False, verbose=0):
 quiet_opt = click.option("-q", "--quiet", is_flag=True, help="Only errors.")
 verbose_opt = click.option("-v", "--verbose", count=True, help="More log output (repeat for more).")
 light_opt = click.option(
-    "--light", callback=numbers(3, "X,Y,Z"), default=None, metavar="X,Y,Z",
+    "--light", callback=light, default=None, metavar="X,Y,Z",
     help="Light position in surface units (the surface spans -1..1; default: the flash, "
          f"{','.join(f'{v:g}' for v in (0, 0, round(cv.CAMERA_HEIGHT, 3)))}).")
 

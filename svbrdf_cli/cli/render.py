@@ -5,6 +5,7 @@ import os
 import click
 
 from svbrdf_cli.cli.options import force_opt, light_opt
+from svbrdf_cli.cli.values import positive, stops
 from svbrdf_cli.errors import OutputExistsError
 
 
@@ -12,9 +13,10 @@ from svbrdf_cli.errors import OutputExistsError
 @click.argument("maps", type=click.Path(file_okay=False))
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Image to write (.png, .tif, .exr).")
 @light_opt
-@click.option("--intensity", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--intensity", type=float, callback=positive, default=None,
               help="Light intensity (default: the conventions' flash intensity).")
-@click.option("--exposure", type=float, default=0.0, show_default=True, help="Exposure change in stops.")
+@click.option("--exposure", type=float, callback=stops, default=0.0, show_default=True,
+              help="Exposure change in stops.")
 @force_opt("an existing image")
 def render_cmd(maps, output, light, intensity, exposure, force):
     """Relight a native map set (normal/diffuse/roughness/specular.png).

@@ -39,3 +39,25 @@ def exposure(ctx, param, value):
     if not abs(stops) <= MAX_EXPOSURE_STOPS:  # NaN and infinities too
         raise click.BadParameter(f"expected 'auto' or stops within ±{MAX_EXPOSURE_STOPS:g}; got '{value}'.")
     return stops
+
+
+def stops(ctx, param, value):
+    """An exposure change in stops, finite and within ±MAX_EXPOSURE_STOPS."""
+    if value is None or not abs(value) <= MAX_EXPOSURE_STOPS:
+        raise click.BadParameter(f"expected stops within ±{MAX_EXPOSURE_STOPS:g}; got '{value}'.")
+    return value
+
+
+def positive(ctx, param, value):
+    """A finite number above 0 (or nothing)."""
+    if value is not None and not (math.isfinite(value) and value > 0):
+        raise click.BadParameter(f"expected a finite number above 0; got '{value}'.")
+    return value
+
+
+def light(ctx, param, value):
+    """X,Y,Z of a light above the surface (Z > 0)."""
+    xyz = numbers(3, "X,Y,Z")(ctx, param, value)
+    if xyz is not None and xyz[2] <= 0:
+        raise click.BadParameter(f"the light must be above the surface (Z > 0); got '{value}'.")
+    return xyz

@@ -51,11 +51,3 @@ def test_describe_failure_is_one_line():
     assert "smaller --size" in batch.describe_failure("a.jpg", MemoryError())
     line = batch.describe_failure("a.jpg", ValueError("bad\nsecond line"))
     assert "\n" not in line and "'a.jpg'" in line and "ValueError: bad" in line
-
-
-def test_clean_partials_removes_only_our_temporaries(tmp_path):
-    for name in (".p0.abc.partial", ".p1.abc.old", "p2", ".keep"):
-        (tmp_path / name).mkdir()
-    batch.clean_partials(str(tmp_path))
-    assert sorted(os.listdir(tmp_path)) == [".keep", "p2"]
-    batch.clean_partials(str(tmp_path / "missing"))  # nothing to clean is no error

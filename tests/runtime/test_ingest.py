@@ -38,7 +38,7 @@ def test_srgb_files_are_decoded_to_linear(tmp_path):
 
 def test_grey_and_alpha_become_rgb(tmp_path):
     write_image(tmp_path / "grey.png", np.full((40, 40, 1), 0.2, np.float32))
-    write_image(tmp_path / "rgba.png", np.concatenate([np.full((40, 40, 3), 0.6), np.zeros((40, 40, 1))], -1))
+    write_image(tmp_path / "rgba.png", np.concatenate([np.full((40, 40, 3), 0.6), np.ones((40, 40, 1))], -1))
     for name in ("grey.png", "rgba.png"):
         assert load_photo(tmp_path / name).linear.shape == (40, 40, 3), name
 

@@ -165,8 +165,9 @@ def test_normal_green_follows_the_engine(maps, tmp_path, preset):
 def test_svbrdf_preset_is_exactly_the_native_set(maps, tmp_path):
     out = tmp_path / "native"
     paths = presets.write_svbrdf(out, maps, bits=16)
-    assert sorted(os.listdir(out)) == sorted(n + ".png" for n in cv.MAP_NAMES)
-    assert sorted(paths) == sorted(str(out / (n + ".png")) for n in cv.MAP_NAMES)
+    names = sorted([n + ".png" for n in cv.MAP_NAMES] + ["texture_set.json"])  # the json marks it as ours
+    assert sorted(os.listdir(out)) == names
+    assert sorted(paths) == sorted(str(out / n) for n in names)
     back = mapset.read_map_set(out)
     for k in cv.MAP_NAMES:
         np.testing.assert_allclose(back[k], maps[k], atol=2e-3)
@@ -352,7 +353,7 @@ def test_refuses_to_overwrite_and_force_replaces(maps, tmp_path):
 def test_failure_midway_leaves_nothing(maps, tmp_path, monkeypatch, preset):
     real, calls = imageio.write_image, []
 
-    def flaky(path, pixels, bits=8):
+    def flaky(path, pixels, bits=8, colour=True):
         calls.append(path)
         if len(calls) == 2:
             raise ImageWriteError(f"Could not write '{path}': disk full.")
@@ -369,10 +370,41 @@ def test_failure_with_force_keeps_the_old_set(maps, tmp_path, monkeypatch):
     presets.write_unreal(tmp_path / "ue", maps)
     before = sorted(os.listdir(tmp_path / "ue"))
 
-    def broken(path, pixels, bits=8):
+    def broken(path, pixels, bits=8, colour=True):
         raise ImageWriteError("boom")
 
     monkeypatch.setattr(imageio, "write_image", broken)
     with pytest.raises(ImageWriteError):
         presets.write_unreal(tmp_path / "ue", maps, force=True)
     assert os.listdir(tmp_path) == ["ue"] and sorted(os.listdir(tmp_path / "ue")) == before
+
+
+def _png_chunks(path):
+    """The chunk types of a PNG file."""
+    import struct
+
+    data, i, kinds = open(path, "rb").read(), 8, []
+    while i + 8 <= len(data):
+        n, kind = struct.unpack(">I4s", data[i:i + 8])
+        kinds.append(kind.decode("latin-1"))
+        i += 12 + n
+    return kinds
+
+
+@pytest.mark.parametrize("preset", list(presets.PRESETS))
+def test_data_maps_are_untagged_and_colour_maps_srgb(maps, tmp_path, preset):
+    """What texture_set.json calls linear carries no sRGB/gAMA/cHRM chunk (no viewer applies a colour
+    transform to it); what it calls sRGB carries the sRGB chunk."""
+    presets.write_preset(preset, tmp_path / "set", maps)
+    meta = json.loads((tmp_path / "set" / "texture_set.json").read_text())
+    spaces = set()
+    for name, info in meta["files"].items():
+        if not name.endswith(".png"):
+            continue
+        chunks = _png_chunks(tmp_path / "set" / name)
+        spaces.add(info["colour_space"])
+        if info["colour_space"] == "sRGB":
+            assert "sRGB" in chunks, (name, chunks)
+        else:
+            assert not {"sRGB", "gAMA", "cHRM", "iCCP"} & set(chunks), (name, chunks)
+    assert "linear" in spaces

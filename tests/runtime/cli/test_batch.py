@@ -35,7 +35,7 @@ def _bad_inputs(d):
     (d / "bomb.png").write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", 30000, 30000, 8, 2, 0, 0, 0))
                                  + chunk(b"IDAT", zlib.compress(b"\0" * 300001)) + chunk(b"IEND", b""))
     (d / "fake.dng").write_bytes(b"II*\0" + os.urandom(4000))  # a RAW LibRaw cannot decode
-    return {"empty.jpg": "empty", "notes.jpg": "Could not read", "truncated.png": "damaged", "tiny.png": "too small",
+    return {"empty.jpg": "empty", "notes.jpg": "Could not read", "truncated.png": "truncated", "tiny.png": "too small",
             "bomb.png": "Could not read", "fake.dng": "Could not decode RAW"}
 
 
@@ -55,8 +55,6 @@ def test_bad_inputs_get_one_line_errors_and_the_batch_goes_on(tmp_path):
 
 
 def test_accepted_variants_grey_16bit_alpha_cmyk(tmp_path):
-    import OpenImageIO as oiio
-
     d = tmp_path / "in"
     d.mkdir()
     make_photo(d / "p16.png", bits=16)
@@ -64,12 +62,10 @@ def test_accepted_variants_grey_16bit_alpha_cmyk(tmp_path):
     write_image(d / "grey.png", grey)
     write_image(d / "alpha.png", np.concatenate([np.full((300, 300, 3), 0.4, np.float32),
                                                  np.full((300, 300, 1), 0.5, np.float32)], -1))
-    spec = oiio.ImageSpec(300, 300, 4, "uint8")
-    spec.channelnames = ("C", "M", "Y", "K")
-    spec.attribute("tiff:PhotometricInterpretation", 5)
-    out = oiio.ImageOutput.create(str(d / "cmyk.tif"))
-    assert out.open(str(d / "cmyk.tif"), spec) and out.write_image(np.full((300, 300, 4), [0, 200, 200, 0], np.uint8))
-    out.close()
+    from PIL import Image
+
+    # a real CMYK TIFF (separated inks; OpenImageIO converts it to RGB)
+    Image.fromarray(np.full((300, 300, 3), [230, 60, 50], np.uint8)).convert("CMYK").save(d / "cmyk.tif")
     code, text = run("batch", d, "-o", tmp_path / "out", "--no-preview")
     assert code == 0, text
     assert sorted(os.listdir(tmp_path / "out")) == ["alpha", "cmyk", "grey", "p16"]
@@ -83,11 +79,12 @@ def test_batch_resumes_after_an_interruption(tmp_path):
     for i in range(3):
         make_photo(d / f"p{i}.png", seed=i)
     out = tmp_path / "out"
-    # An interrupted run: p0 finished, p1 killed mid-write (its temporary folder left behind).
+    # An interrupted run: p0 finished, p1 killed mid-write (its temporary folder left behind; no
+    # process has that pid).
     assert run("capture", d / "p0.png", "-o", out)[0] == 0
     stamp = (out / "p0" / "material.json").read_text()
-    (out / ".p1.abc123.partial").mkdir()
-    (out / ".p1.abc123.partial" / "normal.png").write_bytes(b"half")
+    (out / ".svbrdf-999999999-abc123.partial").mkdir()
+    (out / ".svbrdf-999999999-abc123.partial" / "normal.png").write_bytes(b"half")
     code, text = run("batch", d, "-o", out)
     assert code == 0 and "2 done, 1 already done" in text
     assert (out / "p0" / "material.json").read_text() == stamp  # skipped, untouched
@@ -122,3 +119,19 @@ def test_batch_interrupted_by_a_kill_leaves_only_complete_sets(tmp_path):
     assert subprocess.run(cmd).returncode == 0
     assert sorted(n for n in os.listdir(out)) == [f"p{i}" for i in range(6)]
 
+
+
+def test_a_batch_logged_to_a_file_is_one_line_per_photo(tmp_path):
+    """Not a terminal: no progress bar (no carriage returns); warnings on lines of their own."""
+    d = tmp_path / "in"
+    d.mkdir()
+    for i in range(3):
+        make_photo(d / f"p{i}.png", 300, 400, seed=i)
+    make_photo(d / "wide.png", 300, 900, seed=4)
+    cmd = [sys.executable, "-m", "svbrdf_cli.cli.main", "batch", str(d), "-o", str(tmp_path / "out"), "--size", "256"]
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "\r" not in r.stderr
+    lines = r.stderr.splitlines()
+    assert sum(" -> " in line for line in lines) == 4 and lines[-1] == "4 done"
+    assert all(line.startswith(("WARNING:", "INFO:")) or " -> " in line or line == "4 done" for line in lines), lines

@@ -22,7 +22,7 @@ def test_capture_writes_the_native_set_with_record_and_preview(tmp_path):
     assert code == 0, out
     folder = tmp_path / "out" / "glazed_tiles"
     assert sorted(os.listdir(folder)) == sorted(["normal.png", "diffuse.png", "roughness.png", "specular.png",
-                                                  "preview.png", "material.json"])
+                                                  "preview.png", "material.json", "texture_set.json"])
     rec = json.loads((folder / "material.json").read_text())
     assert rec["crop"]["mode"] == "auto" and rec["crop"]["anchor"] == "highlight"
     assert rec["size"] == 512 and rec["model"]["tier"] == DEFAULT_MODEL and rec["input"]["width"] == 1024
