@@ -33,7 +33,8 @@ import torch
 from export import losses as loss_terms
 from export.data import dataset
 from export.files import atomic_torch_save, command_errors, read_json, write_json
-from export.nets.chain import ALL_TIERS, STAGES, VARIANTS, build, physical_input, refined_maps, tier_variant
+from export.nets.chain import (ALL_TIERS, NORMAL_LR_SCALE, STAGES, VARIANTS, build, physical_input, refined_maps,
+                               tier_variant)
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.errors import SvbrdfError
 from svbrdf_cli.physical import PHYSICAL_VERSION
@@ -85,6 +86,7 @@ class StageTrainer:
         self.total = None
         self.elapsed = 0.0
         self.history = []
+        self.init = None  # the checkpoint this run started from (StageTrainer.init_from)
         self._val_batch = None
         self._load_frozen()
         module = self.net.stage(stage)
@@ -95,8 +97,10 @@ class StageTrainer:
             enc = [p for n, p in module.named_parameters() if ".encoder." in n]
             rest = [p for n, p in module.named_parameters() if ".encoder." not in n]
             groups = [{"params": rest, "lr": LR}, {"params": enc, "lr": LR * BACKBONE_LR_SCALE}]
-        else:
-            groups = [{"params": list(module.parameters()), "lr": LR}]
+        else:  # a refining end-to-end net's normal branch learns faster (export.nets.chain.NORMAL_LR_SCALE)
+            normal = [p for n, p in module.named_parameters() if n.startswith("normal.")]
+            rest = [p for n, p in module.named_parameters() if not n.startswith("normal.")]
+            groups = [{"params": rest, "lr": LR}] + ([{"params": normal, "lr": LR * NORMAL_LR_SCALE}] if normal else [])
         for gp in groups:
             gp["base_lr"] = gp["lr"]
         self.opt = torch.optim.Adam(groups, betas=BETAS)
@@ -128,11 +132,27 @@ class StageTrainer:
                 "critics": self.critics.state_dict() if self.critics is not None else None,
                 "critic_optimizer": self.critic_opt.state_dict() if self.critic_opt is not None else None,
                 "config": dataclasses.asdict(self.cfg), "conventions": cv.CONVENTIONS_VERSION,
-                "physical_version": PHYSICAL_VERSION}
+                "physical_version": PHYSICAL_VERSION, "init": self.init}
 
     def save(self):
         os.makedirs(self.out, exist_ok=True)
         atomic_torch_save(self.state(), self.path)
+
+    def init_from(self, path):
+        """Start from the weights of another run's checkpoint where names and shapes match (a new branch
+        keeps its initialisation; the optimiser starts fresh). Returns what was taken, in words."""
+        ck = torch.load(path, map_location=self.device, weights_only=False)
+        if ck.get("stage") != self.stage:
+            raise SvbrdfError(f"{path}: is a {ck.get('stage')!r} checkpoint, not {self.stage!r}")
+        if self.cfg.refine and ck.get("physical_version") != PHYSICAL_VERSION:
+            raise SvbrdfError(f"{path}: refines version {ck.get('physical_version')!r} of the physical estimate, "
+                              f"not the current {PHYSICAL_VERSION!r}")
+        own = self.net.stage(self.stage).state_dict()
+        take = {k: v for k, v in ck["weights"].items() if k in own and own[k].shape == v.shape}
+        self.net.stage(self.stage).load_state_dict(take, strict=False)
+        self.init = {"from": os.path.abspath(path), "step": ck.get("step"), "tensors": len(take),
+                     "new_tensors": len(own) - len(take)}
+        return f"initialised from {path} (step {ck.get('step')}): {len(take)} tensors, {len(own) - len(take)} new"
 
     def resume(self):
         if not os.path.exists(self.path):
@@ -153,6 +173,7 @@ class StageTrainer:
         self.opt.load_state_dict(ck["optimizer"])
         self.step, self.total, self.elapsed = ck["step"], ck["total"], ck["elapsed"]
         self.history = ck["history"]
+        self.init = ck.get("init")
         self.gen.set_state(ck["generator"])
         if self.critics is not None and ck.get("critics"):
             self.critics.load_state_dict(ck["critics"])
@@ -247,11 +268,12 @@ class StageTrainer:
 
 
 def train_stage(stage, out, config, steps=None, minutes=None, resume=True, checkpoint_every=50,
-                val_every=100, progress=True, bank=None, net=None, log=print, until=None):
+                val_every=100, progress=True, bank=None, net=None, log=print, until=None, init_from=None):
     """Train one stage; returns the trainer (with its history).
 
     ``until``: stop (checkpointed) at this step, as an interruption would;
-    the run resumes from there.
+    the run resumes from there. ``init_from``: a checkpoint (``<stage>.pt``) whose weights start a new
+    run where names and shapes match (see :meth:`StageTrainer.init_from`).
     """
     from tqdm import tqdm
 
@@ -259,6 +281,8 @@ def train_stage(stage, out, config, steps=None, minutes=None, resume=True, check
     resumed = resume and t.resume()
     if resumed:
         log(f"{stage}: resuming at step {t.step}/{t.total}")
+    elif init_from:
+        log(f"{stage}: {t.init_from(init_from)}")
     if t.total is None:
         if steps:
             t.total = int(steps)
@@ -307,6 +331,7 @@ def record_provenance(out, trainer, val):
         "seconds": round(trainer.elapsed, 1), "samples_seen": trainer.step * cfg.batch,
         "losses": {"adversarial": cfg.adversarial, "perceptual": cfg.perceptual} if trainer.stage == "aux" else None,
         "validation": val, "final_loss": trainer.history[-1]["loss"] if trainer.history else None,
+        "initialised_from": trainer.init,
         "data": {"generator": "export.data.dataset.make_batch", "config": dataset.config_dict(trainer.data_cfg),
                  "cc0_seeds": trainer.bank.names if trainer.bank is not None else [],
                  "validation": f"{cfg.val_samples} samples, seed {VAL_SEED} stream {VAL_STREAM}"},
@@ -328,7 +353,13 @@ def load_trained(out, tier=None, device="cpu", stages=STAGES):
             continue
         p = os.path.join(out, f"{s}.pt")
         if os.path.exists(p):
-            net.stage(s).load_state_dict(torch.load(p, map_location=device, weights_only=False)["weights"])
+            # a run from before the normal branch (export.nets.chain.E2E_NORMAL_BASE) lacks only that
+            # branch, whose zero head leaves the maps as they were trained
+            missing, unexpected = net.stage(s).load_state_dict(
+                torch.load(p, map_location=device, weights_only=False)["weights"], strict=False)
+            if unexpected or any(not k.startswith("normal.") for k in missing):
+                raise SvbrdfError(f"{p}: does not match the {tier} network (missing {missing[:3]}, "
+                                  f"unexpected {unexpected[:3]})")
     return net.eval()
 
 
@@ -345,6 +376,8 @@ def load_trained(out, tier=None, device="cpu", stages=STAGES):
 @click.option("--seed", default=0, show_default=True)
 @click.option("--threads", default=0, help="torch threads (0: default).")
 @click.option("--fresh", is_flag=True, help="Start over instead of resuming a stage's checkpoint.")
+@click.option("--init-from", type=click.Path(exists=True, file_okay=False), default=None,
+              help="A run folder whose <stage>.pt weights start this run where names and shapes match.")
 @click.option("--no-adversarial", is_flag=True, help="Aux stage without the WGAN-GP term.")
 @click.option("--checkpoint-every", default=50, show_default=True)
 @click.option("--val-every", default=100, show_default=True)
@@ -356,7 +389,7 @@ def load_trained(out, tier=None, device="cpu", stages=STAGES):
 @click.option("--variant", type=click.Choice(tuple(VARIANTS)), default=None,
               help="chain: the paper's model; nomask / e2e: Table IV ablations (aux without masks; "
                    "one UNet from photo to maps with the chain's parameter count). Default: the tier's own.")
-def cli(stage, tier, out, steps, minutes, batch, size, device, seed, threads, fresh, no_adversarial,
+def cli(stage, tier, out, steps, minutes, batch, size, device, seed, threads, fresh, init_from, no_adversarial,
         checkpoint_every, val_every, shared, refine, variant):
     """Train the model stage by stage."""
     if threads:
@@ -378,7 +411,7 @@ def cli(stage, tier, out, steps, minutes, batch, size, device, seed, threads, fr
             train_stage(s, out, cfg, steps=math.ceil(steps * share) if steps else None,
                         minutes=minutes * share if minutes else None, resume=not fresh,
                         checkpoint_every=checkpoint_every, val_every=val_every, bank=bank,
-                        log=click.echo)
+                        log=click.echo, init_from=os.path.join(init_from, f"{s}.pt") if init_from else None)
     click.echo(f"{out}: " + ", ".join(f"{s}.pt" for s in stages) + ", provenance.json")
 
 

@@ -62,6 +62,12 @@ TIERS = {
 }
 #: Tiers that are one end-to-end UNet of this base width (the ``e2e`` variant, no intermediate targets).
 E2E_TIERS = {"lite": 16}
+#: Refining end-to-end tiers also have a UNet of this base width (depth 4) of their own for the normals'
+#: tilt: sharing the maps UNet, the normals never learned (its features went to the easier diffuse,
+#: roughness and specular corrections, and the normal head stayed at zero; docs/training.md).
+E2E_NORMAL_BASE = 16
+#: That normal branch trains at this multiple of the learning rate.
+NORMAL_LR_SCALE = 5.0
 #: Every tier, cheapest first.
 ALL_TIERS = tuple(E2E_TIERS) + tuple(TIERS)
 
@@ -206,7 +212,7 @@ class EndToEndNet(nn.Module):
     whole chain of ``tier`` (:func:`e2e_base`).
     """
 
-    def __init__(self, tier="fast", base=None, depth=5, refine=True):
+    def __init__(self, tier="fast", base=None, depth=5, refine=True, normal_base=E2E_NORMAL_BASE):
         super().__init__()
         self.tier = tier if isinstance(tier, str) else "custom"
         self.variant = "e2e"
@@ -214,6 +220,8 @@ class EndToEndNet(nn.Module):
         self.base = base or e2e_base(tier)
         self.maps = nn.ModuleDict({"all": _correction_unet(3 + PHYSICAL_CHANNELS, 10, self.base, depth) if refine
                                    else UNet(3, 10, base=self.base, depth=depth)})
+        if refine and normal_base:  # the normals' tilt (x, y) from a UNet of their own
+            self.maps["normal"] = _correction_unet(3 + PHYSICAL_CHANNELS, 2, normal_base, 4)
 
     def stage(self, name):
         if name != "maps":
@@ -230,7 +238,11 @@ class EndToEndNet(nn.Module):
         if self.refine:
             phys = (aux or {}).get("physical")
             phys = physical_input(photo) if phys is None else phys
-            return refined_maps(phys, self.maps["all"](torch.cat([_centre(photo), _centre(phys)], 1)))
+            x = torch.cat([_centre(photo), _centre(phys)], 1)
+            corr = self.maps["all"](x)
+            if "normal" in self.maps:
+                corr = torch.cat([corr[:, :2] + self.maps["normal"](x), corr[:, 2:]], 1)
+            return refined_maps(phys, corr)
         return _encode_maps_head(self.maps["all"](_centre(photo)), photo)
 
     def forward(self, photo, physical=None):

@@ -108,3 +108,27 @@ def test_the_command_reports_library_errors_in_one_line(tmp_path):
                                     "--shared", str(tmp_path)])
     assert r.exit_code == 1, r.output
     assert "Error: the e2e variant has no 'masks' stage" in r.output and "Traceback" not in r.output
+
+
+def test_a_run_can_start_from_another_runs_weights(tmp_path):
+    """--init-from: matching tensors are taken, a new branch keeps its (zero-head) start, the optimiser
+    and step start fresh, and the checkpoint and provenance say where it came from."""
+    import dataclasses
+
+    import torch
+
+    lite = dataclasses.replace(CFG, tier="lite", variant="e2e")
+    TR.train_stage("maps", str(tmp_path / "a"), lite, steps=2, progress=False, log=_quiet)
+    ck = torch.load(tmp_path / "a" / "maps.pt", weights_only=False)
+    old = {k: v for k, v in ck["weights"].items() if not k.startswith("normal.")}  # as a run without the branch
+    ck["weights"] = old
+    torch.save(ck, tmp_path / "a" / "maps.pt")
+    t = TR.StageTrainer("maps", str(tmp_path / "b"), lite)
+    t.init_from(str(tmp_path / "a" / "maps.pt"))
+    assert t.step == 0 and t.init["tensors"] == len(old) and t.init["new_tensors"] > 0
+    weights = t.net.stage("maps").state_dict()
+    assert all(torch.equal(weights[k], v) for k, v in old.items())
+    assert float(weights["normal.decoder.head.weight"].abs().max()) == 0.0
+    TR.train_stage("maps", str(tmp_path / "c"), lite, steps=1, progress=False, log=_quiet,
+                   init_from=str(tmp_path / "a" / "maps.pt"))
+    assert TR.read_json(tmp_path / "c" / "provenance.json")["stages"]["maps"]["initialised_from"]["tensors"] == len(old)
