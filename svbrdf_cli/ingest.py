@@ -44,14 +44,17 @@ class Photo:
     path: str
     kind: str                   # "raw", "encoded" or "linear"
     bits: int
+    scale: float = 1.0          # decoded at this fraction of the file's size (1/2, 1/4 ...)
 
 
-def load_photo(path, white_balance=None):
+def load_photo(path, white_balance=None, min_side=None):
     """Read a photo as linear RGB (see the module docstring).
 
     Args:
         path: the file.
         white_balance: optional (r, g, b) multipliers applied to the linear image.
+        min_side: the fewest pixels the short side needs (what the output uses): a photo at least twice
+            that is decoded at a reduced size (JPEG by DCT scaling, RAW by half-size demosaicing).
 
     Raises:
         ImageReadError: with a one-line message naming the file and what to do.
@@ -62,7 +65,7 @@ def load_photo(path, white_balance=None):
     if os.path.getsize(path) == 0:
         raise ImageReadError(f"Could not read '{path}': the file is empty. Copy it from the camera again.")
     ext = os.path.splitext(path)[1].lower()
-    photo = _load_raw(path) if ext in RAW_EXTENSIONS else _load_image(path)
+    photo = _load_raw(path, min_side) if ext in RAW_EXTENSIONS else _load_image(path, min_side)
     _check_exposed(path, photo.linear)
     if white_balance is not None:
         photo.linear = photo.linear * np.asarray(white_balance, np.float32).reshape(1, 1, 3)
@@ -83,13 +86,15 @@ def encode_for_network(linear):
     return cv.image_to_encoded(np.asarray(linear, np.float32)).astype(np.float32)
 
 
-def _load_raw(path):
+def _load_raw(path, min_side=None):
     import rawpy
 
     try:
         with rawpy.imread(path) as raw:
+            factor = _reduction(raw.sizes.width, raw.sizes.height, min_side)
+            # half-size demosaicing (each 2x2 Bayer block one pixel) when half the size is enough
             rgb = raw.postprocess(use_camera_wb=True, no_auto_bright=True, output_bps=16, gamma=(1, 1),
-                                  output_color=rawpy.ColorSpace.sRGB)
+                                  output_color=rawpy.ColorSpace.sRGB, half_size=factor > 1)
     except (rawpy.LibRawError, OSError, ValueError) as e:
         why = e.args[0] if e.args else ""
         why = (why.decode(errors="replace") if isinstance(why, bytes) else str(why)).strip() or type(e).__name__
@@ -97,7 +102,12 @@ def _load_raw(path):
                              "Convert it to DNG or 16-bit TIFF with the camera's software.") from None
     if rgb.ndim != 3 or rgb.shape[-1] != 3:
         raise ImageReadError(f"Could not decode RAW '{path}': got {rgb.shape} instead of RGB. Convert it to TIFF.")
-    return Photo(rgb.astype(np.float32) / 65535.0, path, "raw", 16)
+    if factor > 2:
+        import cv2
+
+        h, w = rgb.shape[:2]
+        rgb = cv2.resize(rgb, (w * 2 // factor, h * 2 // factor), interpolation=cv2.INTER_AREA)
+    return Photo(rgb.astype(np.float32) / 65535.0, path, "raw", 16, 1.0 / factor)
 
 
 #: Photos over this many pixels are decoded at a reduced size (halved until under it: JPEG by its
@@ -172,10 +182,14 @@ def _orient(a, orientation):
     return a
 
 
-def _reduction(w, h):
-    """The power of two the photo is decoded at a fraction of (1 when it fits :data:`DECODE_MAX_PIXELS`)."""
+def _reduction(w, h, min_side=None):
+    """The power of two the photo is decoded at a fraction of: enough for it to fit
+    :data:`DECODE_MAX_PIXELS`, and with ``min_side``, as much more as keeps its short side at least
+    that (the most the output needs; up to 1/8, libjpeg's smallest DCT scale)."""
     f = 1
     while (w // f) * (h // f) > DECODE_MAX_PIXELS:
+        f *= 2
+    while min_side and f < 8 and min(w, h) // (2 * f) >= min_side:
         f *= 2
     return f
 
@@ -215,7 +229,7 @@ def _decode_strips(inp, spec, factor):
     return out
 
 
-def _load_image(path):
+def _load_image(path, min_side=None):
     import OpenImageIO as oiio
 
     kind = _sniff(path)
@@ -236,7 +250,7 @@ def _load_image(path):
             spec = inp.spec()
             w, h = spec.width, spec.height
             _check_size(path, kind, w, h)
-            factor = _reduction(w, h)
+            factor = _reduction(w, h, min_side)
             orientation = spec.get_int_attribute("Orientation", 1)
             fmt = str(spec.format)
             floating = fmt in ("half", "float", "double")
@@ -259,7 +273,8 @@ def _load_image(path):
             if inp is not None:
                 inp.close()
     if factor > 1:
-        log.info("'%s' is %dx%d: decoded at 1/%d (%dx%d)", path, w, h, factor, w // factor, h // factor)
+        log.info("'%s' is %dx%d: decoded at 1/%d (%dx%d), all the output needs", path, w, h, factor,
+                 w // factor, h // factor)
     if alpha is not None:
         rgb = _opaque_region(path, rgb, alpha)
     rgb = np.ascontiguousarray(_orient(rgb, orientation))
@@ -268,7 +283,7 @@ def _load_image(path):
         np.maximum(rgb, 0.0, out=rgb)
     elif floating is not None:  # (None: decoded to linear already)
         _srgb_to_linear_inplace(rgb)
-    return Photo(rgb, path, "linear" if floating else "encoded", bits)
+    return Photo(rgb, path, "linear" if floating else "encoded", bits, 1.0 / factor)
 
 
 def _channels(px, spec):

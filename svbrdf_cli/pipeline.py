@@ -264,7 +264,9 @@ class Prepared:
 def prepare(path, opts):
     """Read, crop and expose one photo (the part that needs no model)."""
     t0 = time.perf_counter()
-    photo = ingest.load_photo(path, white_balance=opts.white_balance)
+    # the auto and whole-photo crops keep the photo's short side: decode no more than the output needs
+    need = (opts.size or DEFAULT_SIZE) if opts.crop in ("auto", "none") and opts.corners is None else None
+    photo = ingest.load_photo(path, white_balance=opts.white_balance, min_side=need)
     t1 = time.perf_counter()
     try:
         c = rectify.crop(photo.linear, opts.crop, opts.corners)
@@ -319,7 +321,8 @@ def capture(prepared, chain, out_root, opts, model_name="fast"):
         "conventions_version": cv.CONVENTIONS_VERSION,
         "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         "input": {"file": os.path.abspath(p.path), "sha256": file_sha256(p.path), "kind": p.photo.kind,
-                  "bits": p.photo.bits, "width": int(p.photo.linear.shape[1]), "height": int(p.photo.linear.shape[0])},
+                  "bits": p.photo.bits, "width": int(p.photo.linear.shape[1]), "height": int(p.photo.linear.shape[0]),
+                  "decoded_at": p.photo.scale},
         "model": {"name": model_name, **chain.describe()},
         "crop": _jsonable(p.crop.report),
         "exposure": {"mode": "auto" if opts.exposure is None else "manual", "stops": round(p.gain_ev, 3)},

@@ -68,3 +68,20 @@ def test_real_raw_files(shared_data):
     assert np.isfinite(p.linear).all() and 0.01 < p.linear.mean() < 0.9
     with pytest.raises(ImageReadError, match="GOPR0024_HERO6.GPR.*Convert it"):
         load_photo(raw / "gopro_gpr" / "GOPR0024_HERO6.GPR")
+
+
+def test_decoding_stops_at_the_size_the_output_needs(tmp_path):
+    """A photo at least twice what the output needs is decoded at 1/2, 1/4 ... (JPEG: DCT scaling), and
+    the reduced photo matches the full one area-averaged."""
+    import cv2
+
+    y, x = np.mgrid[0:1800, 0:2400]
+    img = (0.3 + 0.2 * np.sin(x / 40.0) * np.cos(y / 55.0))[..., None] * np.float32([1.0, 0.8, 0.6])
+    write_image(tmp_path / "p.jpg", img.astype(np.float32))
+    full = load_photo(tmp_path / "p.jpg")
+    assert full.scale == 1.0 and full.linear.shape == (1800, 2400, 3)
+    half = load_photo(tmp_path / "p.jpg", min_side=800)
+    assert half.scale == 0.5 and half.linear.shape == (900, 1200, 3)
+    assert load_photo(tmp_path / "p.jpg", min_side=1000).scale == 1.0  # 900 px would be too few
+    ref = cv2.resize(cv.linear_to_srgb(full.linear), (1200, 900), interpolation=cv2.INTER_AREA)
+    assert np.abs(cv.linear_to_srgb(half.linear) - ref).mean() < 2 / 255
