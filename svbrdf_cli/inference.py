@@ -22,6 +22,8 @@ from svbrdf_cli import conventions as cv
 from svbrdf_cli.errors import SvbrdfError
 
 STAGES = ("masks", "aux", "maps")
+#: Pixels of reflected photo around the networks' input, cropped off their output (see :meth:`Chain.__call__`).
+BORDER_MARGIN = 32
 
 #: Shipped model sets live here, one folder per tier.
 MODELS_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "models")
@@ -128,26 +130,33 @@ class Chain:
         """(H, W, 3) encoded image -> dict of HWC outputs (maps stored, plus masks and aux renderings
         when the model has those stages).
 
-        H and W are padded (by reflection) to the models' size multiple and
-        the outputs cropped back.
+        The image is padded by reflection (:data:`BORDER_MARGIN` on each side,
+        then up to the models' size multiple) and the outputs cropped back: the
+        networks' zero padding would otherwise leave a border of its own on
+        every map.
         """
         img = np.asarray(image, dtype=np.float32)
         if img.ndim != 3 or img.shape[-1] != 3:
             raise ValueError(f"expected an (H, W, 3) image, got shape {img.shape}")
         h, w = img.shape[:2]
-        ph, pw = -h % self.multiple, -w % self.multiple
-        padded = np.pad(img, ((0, ph), (0, pw), (0, 0)), mode="reflect" if (ph < h and pw < w) else "edge")
-        x = np.ascontiguousarray(padded.transpose(2, 0, 1)[None])
+        # A reflected margin, then up to the size multiple: the networks' zero padding then shapes the
+        # margin, which is cropped off, instead of the maps' own border.
+        m = min(BORDER_MARGIN, h - 1, w - 1)
+        ph, pw = -(h + 2 * m) % self.multiple, -(w + 2 * m) % self.multiple
+        pad = ((m, m + ph), (m, m + pw), (0, 0))
+        mode = "reflect" if (m + ph < h and m + pw < w) else "edge"
+        x = np.ascontiguousarray(np.pad(img, pad, mode=mode).transpose(2, 0, 1)[None])
         feeds = {"photo": x}
         if any(PHYSICAL_INPUT in self.meta[s]["inputs"].split(",") for s in self.stages):
             from svbrdf_cli import physical
 
-            t0 = time.perf_counter()
-            feeds[PHYSICAL_INPUT] = np.ascontiguousarray(physical.network_input(padded).transpose(2, 0, 1)[None])
+            t0 = time.perf_counter()  # the estimate of the photo as it is (its geometry), padded like it
+            est = np.pad(physical.network_input(img), pad, mode=mode)
+            feeds[PHYSICAL_INPUT] = np.ascontiguousarray(est.transpose(2, 0, 1)[None])
             self.timings["physical"] = time.perf_counter() - t0
         for stage in self.stages:
             t0 = time.perf_counter()
             feeds.update(self._run(stage, feeds))
             self.timings[stage] = time.perf_counter() - t0
         names = [k for k in ("M_b", "M_h", "I_bf", "I_hr", "I_hr2") if k in feeds] + list(cv.MAP_NAMES)
-        return {k: np.ascontiguousarray(feeds[k][0].transpose(1, 2, 0)[:h, :w]) for k in names}
+        return {k: np.ascontiguousarray(feeds[k][0].transpose(1, 2, 0)[m:m + h, m:m + w]) for k in names}

@@ -70,7 +70,8 @@ def test_float16_storage_halves_the_file_and_keeps_the_numbers(tmp_path):
 def test_runtime_chain_matches_torch(tmp_path):
     """svbrdf_cli.inference.Chain (onnxruntime only) reproduces the torch chain, padding and the
     physical estimate it refines included."""
-    from svbrdf_cli.inference import Chain
+    from svbrdf_cli.inference import BORDER_MARGIN, Chain
+    from svbrdf_cli.physical import network_input
 
     torch.manual_seed(0)
     net = _net()
@@ -78,11 +79,13 @@ def test_runtime_chain_matches_torch(tmp_path):
         export_stage(net, stage, str(tmp_path / f"{stage}.onnx"), size=64)
     img = np.random.default_rng(3).random((70, 90, 3), dtype=np.float32)  # not a multiple of 32
     out = Chain(tmp_path)(img)
-    pad = np.pad(img, ((0, 26), (0, 6), (0, 0)), mode="reflect")
+    m = BORDER_MARGIN  # a reflected margin, then up to a multiple of 32; the estimate of the photo, padded alike
+    pad = ((m, m + (-(70 + 2 * m)) % 32), (m, m + (-(90 + 2 * m)) % 32), (0, 0))
+    chw = lambda a: torch.from_numpy(np.ascontiguousarray(a.transpose(2, 0, 1)))[None]  # noqa: E731
     with torch.no_grad():
-        ref = net(torch.from_numpy(pad.transpose(2, 0, 1).copy())[None])
+        ref = net(chw(np.pad(img, pad, mode="reflect")), physical=chw(np.pad(network_input(img), pad, mode="reflect")))
     for k, v in out.items():
-        r = ref[k][0].numpy().transpose(1, 2, 0)[:70, :90]
+        r = ref[k][0].numpy().transpose(1, 2, 0)[m:m + 70, m:m + 90]
         assert v.shape == r.shape, k
         assert np.abs(v - r).max() < 1e-4, k
 
@@ -124,17 +127,19 @@ def test_int8_weights_stay_close(tmp_path):
 
 def test_end_to_end_baseline_exports_with_the_photo_only(tmp_path):
     from export.nets.chain import EndToEndNet
-    from svbrdf_cli.inference import Chain
+    from svbrdf_cli.inference import BORDER_MARGIN, Chain
 
     torch.manual_seed(0)
     net = EndToEndNet("fast", base=8, depth=3, refine=False).eval()
     export_stage(net, "maps", str(tmp_path / "maps.onnx"), size=64)
     img = np.random.default_rng(3).random((64, 64, 3), dtype=np.float32)
     out = Chain(tmp_path)(img)
+    m = BORDER_MARGIN
+    padded = np.pad(img, ((m, m), (m, m), (0, 0)), mode="reflect")  # 64 + 2m: a multiple of 32 already
     with torch.no_grad():
-        ref = net.run_maps(torch.from_numpy(img).permute(2, 0, 1)[None])
+        ref = net.run_maps(torch.from_numpy(padded).permute(2, 0, 1)[None])
     for k, v in ref.items():
-        assert np.abs(out[k] - v[0].permute(1, 2, 0).numpy()).max() < 1e-4
+        assert np.abs(out[k] - v[0].permute(1, 2, 0).numpy()[m:m + 64, m:m + 64]).max() < 1e-4
 
 
 def test_untrained_refining_models_return_the_physical_estimate(tmp_path):

@@ -4,6 +4,7 @@ import hashlib
 import json
 import os
 
+import numpy as np
 import pytest
 
 from svbrdf_cli.inference import MODELS_DIR, STAGES, Chain, installed_tiers
@@ -70,3 +71,25 @@ def test_the_auto_rule_is_shipped_calibrated_for_the_installed_tiers():
     cal = rule["calibration"]
     assert "seed" in cal["data"] and cal["margin"] > 0 and set(cal["tier_error"]) == set(rule["ladder"])
     assert sum(cal["tiers_taken"].values()) > 0 and all(0 < e < 1 for e in cal["tier_error"].values())
+
+
+@pytest.mark.parametrize("tier", installed_tiers())
+def test_no_border_seam_on_a_uniform_material(tier):
+    """A flash photo of a uniform material: the maps' 4-pixel border matches the 12 pixels inside it (the
+    networks' zero padding used to leave a coloured frame on every diffuse map)."""
+    from svbrdf_cli import conventions as cv
+    from svbrdf_cli.shading import render_maps
+
+    h = w = 256
+    maps = {"normal": np.broadcast_to(np.float32([0, 0, 1]), (h, w, 3)).copy(),
+            "diffuse": np.full((h, w, 3), 0.25, np.float32) * np.float32([1.0, 0.8, 0.6]),
+            "roughness": np.full((h, w, 1), 0.4, np.float32), "specular": np.full((h, w, 3), 0.04, np.float32)}
+    out = Chain(os.path.join(MODELS_DIR, tier), threads=1)(cv.image_to_encoded(render_maps(maps)).astype(np.float32))
+    for k in ("diffuse", "roughness"):
+        d = out[k]
+        c = d.shape[-1]
+        border = np.concatenate([d[:4].reshape(-1, c), d[-4:].reshape(-1, c), d[4:-4, :4].reshape(-1, c),
+                                 d[4:-4, -4:].reshape(-1, c)]).mean(0)
+        inside = np.concatenate([d[4:16, 4:-4].reshape(-1, c), d[-16:-4, 4:-4].reshape(-1, c),
+                                 d[16:-16, 4:16].reshape(-1, c), d[16:-16, -16:-4].reshape(-1, c)]).mean(0)
+        assert np.abs(border - inside).max() < 0.02, (k, border, inside)
