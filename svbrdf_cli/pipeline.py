@@ -68,6 +68,7 @@ class Options:
     confidence: bool = False                   # also write confidence/<map>.png (svbrdf_cli.tta)
     preview: bool = True
     force: bool = False
+    name: str | None = None                    # the material's name in engine file names (default: the photo's)
 
 
 # --------------------------------------------------------------------------
@@ -366,7 +367,7 @@ def capture(prepared, chain, out_root, opts, model_name="fast"):
         return names + [RECORD]
 
     write_preset(opts.preset, folder, maps, bits=opts.bits, fmt=opts.fmt, force=opts.force, extra=extra,
-                 protect=(p.path,))
+                 protect=(p.path,), name=opts.name)
     return folder, record
 
 

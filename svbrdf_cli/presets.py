@@ -305,7 +305,7 @@ def _check_maps(maps):
 # Presets
 # --------------------------------------------------------------------------
 
-def write_svbrdf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=()):
+def write_svbrdf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=(), name=None):
     """Native set: ``normal.png diffuse.png roughness.png specular.png`` and
     ``texture_set.json`` (their roles and encodings).
 
@@ -340,7 +340,7 @@ def write_svbrdf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, pr
     return write_set(folder, files, force, extra, protect)
 
 
-def write_gltf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=()):
+def write_gltf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=(), name=None):
     """glTF 2.0 metallic-roughness set plus ``material.gltf`` (one textured quad).
 
     ``baseColor.png`` (sRGB), ``metallicRoughness.png`` (linear; R = 1 (no
@@ -373,8 +373,10 @@ def write_gltf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, prot
     return write_set(folder, files, force, extra, protect)
 
 
-def write_unreal(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=()):
-    """Unreal Engine set: ``BaseColor`` (sRGB), ``Normal`` (DirectX), ``ORM``, ``Height``.
+def write_unreal(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=(), name=None):
+    """Unreal Engine set, named as Unreal projects name textures: ``T_<Name>_BC`` (base colour, sRGB),
+    ``T_<Name>_N`` (normal, DirectX), ``T_<Name>_ORM``, ``T_<Name>_H`` (height); ``<Name>`` is ``name``
+    or the folder's (:func:`asset_name`), so sets imported into one folder never collide.
 
     ORM is linear (import with sRGB off): R = ambient occlusion (1: none
     estimated), G = roughness, B = metallic. The normal map's green channel is
@@ -389,18 +391,20 @@ def write_unreal(folder, maps, *, bits=8, fmt="png", force=False, extra=None, pr
 
     def files(tmp):
         f = _Files(tmp, bits, fmt, "unreal", "DirectX (green flipped, Y down)")
-        f.colour("BaseColor", base, "base colour")
-        f.data("Normal", normals_to_directx(maps["normal"]), "normal (DirectX, Y down)")
-        f.data("ORM", np.concatenate([np.ones_like(rough), rough, metallic], -1),
+        t = f"T_{asset_name(folder, name)}_"
+        f.colour(t + "BC", base, "base colour")
+        f.data(t + "N", normals_to_directx(maps["normal"]), "normal (DirectX, Y down)")
+        f.data(t + "ORM", np.concatenate([np.ones_like(rough), rough, metallic], -1),
                "R = AO (1: none), G = roughness, B = metallic")
-        f.height("Height", maps["normal"])
+        f.height(t + "H", maps["normal"])
         return f.finish()
 
     return write_set(folder, files, force, extra, protect)
 
 
-def write_unity_hdrp(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=()):
-    """Unity HDRP Lit set: ``BaseMap`` (sRGB), ``MaskMap`` (RGBA), ``Normal``, ``Height``.
+def write_unity_hdrp(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=(), name=None):
+    """Unity HDRP Lit set: ``<Name>_BaseMap`` (sRGB), ``<Name>_MaskMap`` (RGBA), ``<Name>_Normal``,
+    ``<Name>_Height``; ``<Name>`` is ``name`` or the folder's (:func:`asset_name`).
 
     MaskMap is linear (import with sRGB off): R = metallic, G = AO (1),
     B = detail mask (1: a detail map, if one is added, applies everywhere),
@@ -416,11 +420,12 @@ def write_unity_hdrp(folder, maps, *, bits=8, fmt="png", force=False, extra=None
 
     def files(tmp):
         f = _Files(tmp, bits, fmt, "unity-hdrp", "OpenGL (+Y up)")
-        f.colour("BaseMap", base, "base colour")
-        f.data("MaskMap", np.concatenate([metallic, one, one, 1.0 - rough], -1),
+        t = f"{asset_name(folder, name)}_"
+        f.colour(t + "BaseMap", base, "base colour")
+        f.data(t + "MaskMap", np.concatenate([metallic, one, one, 1.0 - rough], -1),
                "R = metallic, G = AO (1), B = detail mask (1), A = smoothness = 1 - roughness")
-        f.data("Normal", normals_to_opengl(maps["normal"]), "normal (OpenGL, +Y up)")
-        f.height("Height", maps["normal"])
+        f.data(t + "Normal", normals_to_opengl(maps["normal"]), "normal (OpenGL, +Y up)")
+        f.height(t + "Height", maps["normal"])
         return f.finish()
 
     return write_set(folder, files, force, extra, protect)
@@ -441,9 +446,17 @@ def name_components(name):
     return [p.lower() for p in re.split(r"[\s_.\-#]+", name) if p]
 
 
-def blender_prefix(folder):
-    """File-name prefix for the Blender preset: the folder name, unless Node Wrangler would misread it."""
-    raw = os.path.basename(os.path.abspath(os.fspath(folder)))
+def asset_name(folder, name=None):
+    """The material's name in engine file names: ``name``, else the set folder's, as letters, digits and
+    underscores (what Unreal and Unity asset names allow); "Material" when nothing is left."""
+    raw = name or os.path.basename(os.path.abspath(os.fspath(folder)))
+    return re.sub(r"[^A-Za-z0-9_]+", "_", raw).strip("_") or "Material"
+
+
+def blender_prefix(folder, name=None):
+    """File-name prefix for the Blender preset: ``name`` or the folder's, unless Node Wrangler would
+    misread it."""
+    raw = name or os.path.basename(os.path.abspath(os.fspath(folder)))
     prefix = re.sub(r"[^A-Za-z0-9-]+", "-", raw).strip("-")
     if not prefix or set(name_components(prefix)) & _NODE_WRANGLER_TAGS:
         if prefix:
@@ -453,7 +466,7 @@ def blender_prefix(folder):
     return prefix
 
 
-def write_blender(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=()):
+def write_blender(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=(), name=None):
     """Blender set, named for Node Wrangler's Principled Texture Setup (Ctrl+Shift+T).
 
     ``<name>_BaseColor.png`` (sRGB), ``<name>_Roughness`` and
@@ -468,7 +481,7 @@ def write_blender(folder, maps, *, bits=8, fmt="png", force=False, extra=None, p
     _check_options(bits, fmt)
     _check_maps(maps)
     base, metallic, rough = _metal_rough(maps)
-    prefix = blender_prefix(folder)
+    prefix = blender_prefix(folder, name)
 
     def files(tmp):
         f = _Files(tmp, bits, fmt, "blender", "OpenGL (+Y up)")

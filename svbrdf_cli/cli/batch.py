@@ -32,6 +32,8 @@ def batch_cmd(folder, job, engine, address, workers):
       svbrdf batch shoot/ -o textures_ue --preset unreal --size 2048 -q
       svbrdf batch /mnt/shoot -o s3://studio/textures --engine ray --address ray://head:10001
     """
+    if job.opts.name:
+        raise click.UsageError("--name names one material; a batch names each set after its photo.")
     job.skip_done = True
     files, ignored = collect_inputs([folder])
     if not files:

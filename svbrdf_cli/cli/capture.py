@@ -31,4 +31,6 @@ def capture_cmd(inputs, job):
     files, ignored = collect_inputs(inputs)
     if not files:
         raise click.UsageError("no photos found in " + ", ".join(f"'{p}'" for p in inputs) + ".")
+    if job.opts.name and len(files) > 1:
+        raise click.UsageError(f"--name names one material; {len(files)} photos were given.")
     finish(run_local(files, job), ignored, job.quiet)

@@ -146,8 +146,8 @@ def test_flat_normals_give_mid_grey_and_zero_depth():
 # --------------------------------------------------------------------------
 
 def normal_file(preset):
-    return {"svbrdf": "normal.png", "gltf": "normal.png", "unity-hdrp": "Normal.png",
-            "unreal": "Normal.png", "blender": "set_Normal.png"}[preset]
+    return {"svbrdf": "normal.png", "gltf": "normal.png", "unity-hdrp": "set_Normal.png",
+            "unreal": "T_set_N.png", "blender": "set_Normal.png"}[preset]
 
 
 @pytest.mark.parametrize("preset", list(presets.PRESETS))
@@ -191,25 +191,27 @@ def test_gltf_layout(maps, tmp_path):
 def test_unreal_layout(maps, tmp_path):
     out = tmp_path / "ue"
     presets.write_unreal(out, maps, bits=16)
-    assert sorted(os.listdir(out)) == ["BaseColor.png", "Height.png", "Normal.png", "ORM.png", "texture_set.json"]
-    orm = read_image(out / "ORM.png")
+    assert sorted(os.listdir(out)) == ["T_ue_BC.png", "T_ue_H.png", "T_ue_N.png", "T_ue_ORM.png", "texture_set.json"]
+    presets.write_unreal(tmp_path / "other", maps, name="Oak Planks #2")
+    assert "T_Oak_Planks_2_BC.png" in os.listdir(tmp_path / "other")
+    orm = read_image(out / "T_ue_ORM.png")
     np.testing.assert_allclose(left(orm), [1.0, 0.3, 0.0], atol=1e-3)
     np.testing.assert_allclose(right(orm), [1.0, 0.7, 1.0], atol=1e-3)
-    assert abs(left(read_image(out / "BaseColor.png")) - 0.4845).max() <= 1 / 255
-    n = read_image(out / "Normal.png")
+    assert abs(left(read_image(out / "T_ue_BC.png")) - 0.4845).max() <= 1 / 255
+    n = read_image(out / "T_ue_N.png")
     np.testing.assert_allclose(n[0, 0], cv.encode_normals(maps["normal"][0, 0] * [1, -1, 1]), atol=1e-3)
 
 
 def test_unity_hdrp_layout(maps, tmp_path):
     out = tmp_path / "u"
     presets.write_unity_hdrp(out, maps)
-    assert sorted(os.listdir(out)) == ["BaseMap.png", "Height.png", "MaskMap.png", "Normal.png", "texture_set.json"]
-    mask = read_rgba(out / "MaskMap.png")
+    assert sorted(os.listdir(out)) == ["texture_set.json", "u_BaseMap.png", "u_Height.png", "u_MaskMap.png", "u_Normal.png"]
+    mask = read_rgba(out / "u_MaskMap.png")
     assert mask.shape[-1] == 4
     # R metallic, G AO, B detail mask, A smoothness = 1 - roughness
     np.testing.assert_allclose(left(mask), [0.0, 1.0, 1.0, 0.7], atol=1 / 255)
     np.testing.assert_allclose(right(mask), [1.0, 1.0, 1.0, 0.3], atol=1 / 255)
-    assert abs(left(read_image(out / "BaseMap.png")) - 0.4845).max() <= 1 / 255
+    assert abs(left(read_image(out / "u_BaseMap.png")) - 0.4845).max() <= 1 / 255
 
 
 def test_unity_mask_map_keeps_data_under_partial_alpha(tmp_path):
@@ -220,9 +222,9 @@ def test_unity_mask_map_keeps_data_under_partial_alpha(tmp_path):
     maps = {"normal": np.tile(np.float32([0, 0, 1]), (4, 4, 1)), "diffuse": diffuse.astype(np.float32),
             "roughness": np.full((4, 4, 1), 0.5, np.float32), "specular": specular.astype(np.float32)}
     presets.write_unity_hdrp(tmp_path / "u", maps, bits=16)
-    np.testing.assert_allclose(read_rgba(tmp_path / "u" / "MaskMap.png")[0, 0], [0.5, 1, 1, 0.5], atol=1e-4)
+    np.testing.assert_allclose(read_rgba(tmp_path / "u" / "u_MaskMap.png")[0, 0], [0.5, 1, 1, 0.5], atol=1e-4)
     presets.write_unity_hdrp(tmp_path / "e", maps, fmt="exr")
-    np.testing.assert_allclose(read_rgba(tmp_path / "e" / "MaskMap.exr")[0, 0], [0.5, 1, 1, 0.5], atol=1e-5)
+    np.testing.assert_allclose(read_rgba(tmp_path / "e" / "e_MaskMap.exr")[0, 0], [0.5, 1, 1, 0.5], atol=1e-5)
 
 
 def test_blender_layout_and_node_wrangler_names(maps, tmp_path):
@@ -252,8 +254,8 @@ def test_blender_prefix_avoids_node_wrangler_tags(tmp_path):
 def test_exr_for_linear_data(maps, tmp_path):
     out = tmp_path / "ue"
     presets.write_unreal(out, maps, fmt="exr")
-    assert sorted(os.listdir(out)) == ["BaseColor.png", "Height.exr", "Normal.exr", "ORM.exr", "texture_set.json"]
-    orm = read_image(out / "ORM.exr")
+    assert sorted(os.listdir(out)) == ["T_ue_BC.png", "T_ue_H.exr", "T_ue_N.exr", "T_ue_ORM.exr", "texture_set.json"]
+    orm = read_image(out / "T_ue_ORM.exr")
     np.testing.assert_allclose(right(orm), [1.0, 0.7, 1.0], atol=1e-6)
     with pytest.raises(ValueError, match="PNG only"):
         presets.write_gltf(tmp_path / "g", maps, fmt="exr")
@@ -266,10 +268,10 @@ def test_texture_set_json_records_height_depth(tmp_path):
     presets.write_unreal(tmp_path / "ue", maps)
     meta = json.loads((tmp_path / "ue" / "texture_set.json").read_text())
     assert meta["preset"] == "unreal" and meta["normal_map"].startswith("DirectX")
-    assert meta["height"]["file"] == "Height.png" and meta["files"]["Height.png"]["bits"] == 16
+    assert meta["height"]["file"] == "T_ue_H.png" and meta["files"]["T_ue_H.png"]["bits"] == 16
     assert abs(meta["height"]["depth"] / np.ptp(h) - 1) < 0.1
-    assert meta["files"]["BaseColor.png"]["colour_space"] == "sRGB"
-    assert meta["files"]["ORM.png"]["colour_space"] == "linear"
+    assert meta["files"]["T_ue_BC.png"]["colour_space"] == "sRGB"
+    assert meta["files"]["T_ue_ORM.png"]["colour_space"] == "linear"
 
 
 # --------------------------------------------------------------------------

@@ -39,7 +39,7 @@ def test_debug_and_presets(tmp_path):
     code, out = run("capture", photo, "-o", tmp_path / "ue", "--preset", "unreal", "--debug", "--model", "fast")
     assert code == 0, out
     files = set(os.listdir(tmp_path / "ue" / "wood"))
-    assert {"BaseColor.png", "Normal.png", "ORM.png", "Height.png", "texture_set.json", "material.json",
+    assert {"T_wood_BC.png", "T_wood_N.png", "T_wood_ORM.png", "T_wood_H.png", "texture_set.json", "material.json",
             "preview.png", "debug"} <= files
     assert sorted(os.listdir(tmp_path / "ue" / "wood" / "debug")) == sorted(
         f"{k}.png" for k in ("input", "M_b", "M_h", "I_bf", "I_hr", "I_hr2"))
@@ -115,3 +115,12 @@ def test_manual_corners_exposure_and_white_balance_are_recorded(tmp_path):
     code, out = run("capture", photo, "-o", tmp_path / "o2", "--corners", "0,0,900,0,900,900,0,900")
     assert code == 1 and "outside" in out
 
+
+
+def test_name_sets_the_engine_file_names_of_one_capture(tmp_path):
+    photo = make_photo(tmp_path / "IMG_0042.png")
+    code, out = run("capture", photo, "-o", tmp_path / "o", "--preset", "unreal", "--name", "Oak", "--size", 256)
+    assert code == 0, out
+    assert "T_Oak_BC.png" in os.listdir(tmp_path / "o" / "IMG_0042")
+    other = make_photo(tmp_path / "IMG_0043.png", seed=1)
+    assert run("capture", photo, other, "-o", tmp_path / "p", "--name", "Oak")[0] == 2  # one name, two photos

@@ -1,5 +1,7 @@
 """``svbrdf export``: re-target a map set; never over an existing folder without ``--force``."""
 
+import os
+
 import numpy as np
 
 from svbrdf_cli import conventions as cv
@@ -30,9 +32,9 @@ def test_cli_export(tmp_path):
     args = ["export", str(tmp_path / "maps"), "-o", str(out), "--preset", "unreal", "--bits", "16"]
     code, output = run(*args)
     assert code == 0, output
-    orm = read_image(out / "ORM.png")
+    orm = read_image(out / "T_ue_ORM.png")
     np.testing.assert_allclose(right(orm), [1.0, 0.7, 1.0], atol=2e-3)
-    assert read_image(out / "Normal.png")[..., 1].max() < 0.4
+    assert read_image(out / "T_ue_N.png")[..., 1].max() < 0.4
 
     code, output = run(*args)
     assert code == 1
@@ -45,3 +47,10 @@ def test_cli_export(tmp_path):
     assert code == 2 and "PNG only" in output
     code, output = run("export", tmp_path / "nothing", "-o", tmp_path / "x", "--preset", "gltf")
     assert code == 1 and "normal.png" in output
+
+
+def test_name_names_the_engine_files(tmp_path):
+    mapset.write_map_set(tmp_path / "maps", _maps())
+    code, output = run("export", tmp_path / "maps", "-o", tmp_path / "u", "--preset", "unity-hdrp", "--name", "Oak")
+    assert code == 0, output
+    assert {"Oak_BaseMap.png", "Oak_MaskMap.png", "Oak_Normal.png", "Oak_Height.png"} <= set(os.listdir(tmp_path / "u"))
