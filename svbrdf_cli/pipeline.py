@@ -69,6 +69,7 @@ class Options:
     preview: bool = True
     force: bool = False
     name: str | None = None                    # the material's name in engine file names (default: the photo's)
+    tileable: bool = False                     # seamless maps (svbrdf_cli.tiling)
 
 
 # --------------------------------------------------------------------------
@@ -308,6 +309,12 @@ def capture(prepared, chain, out_root, opts, model_name="fast"):
         if not np.isfinite(v).all():
             raise SvbrdfError(f"The model produced non-finite values for '{p.path}' ({k}); please report this photo.")
     maps = stored_to_linear(stored)
+    if opts.tileable:
+        from svbrdf_cli.mapset import linear_to_stored
+        from svbrdf_cli.tiling import make_tileable
+
+        maps = make_tileable(maps)
+        stored = linear_to_stored(maps)
     t2 = time.perf_counter()
     timings["upsample"] = t2 - t1
     timings["network"] = t1 - t0
@@ -330,7 +337,7 @@ def capture(prepared, chain, out_root, opts, model_name="fast"):
         "white_balance": list(opts.white_balance) if opts.white_balance else None,
         "network_size": NETWORK_SIZE, "size": side,
         "upsampling": opts.upsample if side != NETWORK_SIZE else None,
-        "preset": opts.preset, "bits": opts.bits, "format": opts.fmt,
+        "preset": opts.preset, "bits": opts.bits, "format": opts.fmt, "tileable": opts.tileable,
     }
     if conf is not None:
         from svbrdf_cli import tta
@@ -367,7 +374,7 @@ def capture(prepared, chain, out_root, opts, model_name="fast"):
         return names + [RECORD]
 
     write_preset(opts.preset, folder, maps, bits=opts.bits, fmt=opts.fmt, force=opts.force, extra=extra,
-                 protect=(p.path,), name=opts.name)
+                 protect=(p.path,), name=opts.name, tileable=opts.tileable)
     return folder, record
 
 

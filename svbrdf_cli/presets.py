@@ -247,8 +247,8 @@ def _check_options(bits, fmt, png_only=None):
 class _Files:
     """Collects the images of one set in a temporary folder, plus their roles."""
 
-    def __init__(self, tmp, bits, fmt, preset, normal_convention):
-        self.tmp, self.bits, self.fmt = tmp, bits, fmt
+    def __init__(self, tmp, bits, fmt, preset, normal_convention, tileable=False):
+        self.tmp, self.bits, self.fmt, self.tileable = tmp, bits, fmt, tileable
         self.names = []
         self.meta = {"generator": f"svbrdf {__version__}", "conventions_version": cv.CONVENTIONS_VERSION,
                      "preset": preset, "normal_map": normal_convention,
@@ -266,7 +266,7 @@ class _Files:
             self._write(stem + ".png", pixels, bits or self.bits, role, "linear")
 
     def height(self, stem, normals):
-        unit, depth = height_to_unit(normals_to_height(normals))
+        unit, depth = height_to_unit(normals_to_height(normals, tileable=self.tileable))
         self.data(stem, unit[..., None], "height", bits=HEIGHT_BITS)
         self.meta["height"] = {
             "file": self.names[-1], "depth": depth,
@@ -305,7 +305,8 @@ def _check_maps(maps):
 # Presets
 # --------------------------------------------------------------------------
 
-def write_svbrdf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=(), name=None):
+def write_svbrdf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=(), name=None,
+                 tileable=False):
     """Native set: ``normal.png diffuse.png roughness.png specular.png`` and
     ``texture_set.json`` (their roles and encodings).
 
@@ -329,7 +330,7 @@ def write_svbrdf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, pr
 
     def files(tmp):
         mapset.write_map_set(tmp, maps, bits=bits)
-        f = _Files(tmp, bits, fmt, "svbrdf", "OpenGL (+Y up)")
+        f = _Files(tmp, bits, fmt, "svbrdf", "OpenGL (+Y up)", tileable)
         for name, role in zip(cv.MAP_NAMES, ("normal", "diffuse albedo (stored^2.2 = linear)", "roughness",
                                               "specular F0 (stored^2.2 = linear)")):
             space = "sRGB" if name in ("diffuse", "specular") else "linear"
@@ -340,7 +341,8 @@ def write_svbrdf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, pr
     return write_set(folder, files, force, extra, protect)
 
 
-def write_gltf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=(), name=None):
+def write_gltf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=(), name=None,
+                 tileable=False):
     """glTF 2.0 metallic-roughness set plus ``material.gltf`` (one textured quad).
 
     ``baseColor.png`` (sRGB), ``metallicRoughness.png`` (linear; R = 1 (no
@@ -357,7 +359,7 @@ def write_gltf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, prot
     base, metallic, rough = _metal_rough(maps)
 
     def files(tmp):
-        f = _Files(tmp, bits, fmt, "gltf", "OpenGL (+Y up)")
+        f = _Files(tmp, bits, fmt, "gltf", "OpenGL (+Y up)", tileable)
         f.colour("baseColor", base, "base colour")
         f.data("metallicRoughness", np.concatenate([np.ones_like(rough), rough, metallic], -1),
                "R = 1 (no occlusion), G = roughness, B = metallic")
@@ -373,7 +375,8 @@ def write_gltf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, prot
     return write_set(folder, files, force, extra, protect)
 
 
-def write_unreal(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=(), name=None):
+def write_unreal(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=(), name=None,
+                 tileable=False):
     """Unreal Engine set, named as Unreal projects name textures: ``T_<Name>_BC`` (base colour, sRGB),
     ``T_<Name>_N`` (normal, DirectX), ``T_<Name>_ORM``, ``T_<Name>_H`` (height); ``<Name>`` is ``name``
     or the folder's (:func:`asset_name`), so sets imported into one folder never collide.
@@ -390,7 +393,7 @@ def write_unreal(folder, maps, *, bits=8, fmt="png", force=False, extra=None, pr
     base, metallic, rough = _metal_rough(maps)
 
     def files(tmp):
-        f = _Files(tmp, bits, fmt, "unreal", "DirectX (green flipped, Y down)")
+        f = _Files(tmp, bits, fmt, "unreal", "DirectX (green flipped, Y down)", tileable)
         t = f"T_{asset_name(folder, name)}_"
         f.colour(t + "BC", base, "base colour")
         f.data(t + "N", normals_to_directx(maps["normal"]), "normal (DirectX, Y down)")
@@ -402,7 +405,8 @@ def write_unreal(folder, maps, *, bits=8, fmt="png", force=False, extra=None, pr
     return write_set(folder, files, force, extra, protect)
 
 
-def write_unity_hdrp(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=(), name=None):
+def write_unity_hdrp(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=(), name=None,
+                 tileable=False):
     """Unity HDRP Lit set: ``<Name>_BaseMap`` (sRGB), ``<Name>_MaskMap`` (RGBA), ``<Name>_Normal``,
     ``<Name>_Height``; ``<Name>`` is ``name`` or the folder's (:func:`asset_name`).
 
@@ -419,7 +423,7 @@ def write_unity_hdrp(folder, maps, *, bits=8, fmt="png", force=False, extra=None
     one = np.ones_like(rough)
 
     def files(tmp):
-        f = _Files(tmp, bits, fmt, "unity-hdrp", "OpenGL (+Y up)")
+        f = _Files(tmp, bits, fmt, "unity-hdrp", "OpenGL (+Y up)", tileable)
         t = f"{asset_name(folder, name)}_"
         f.colour(t + "BaseMap", base, "base colour")
         f.data(t + "MaskMap", np.concatenate([metallic, one, one, 1.0 - rough], -1),
@@ -466,7 +470,8 @@ def blender_prefix(folder, name=None):
     return prefix
 
 
-def write_blender(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=(), name=None):
+def write_blender(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=(), name=None,
+                 tileable=False):
     """Blender set, named for Node Wrangler's Principled Texture Setup (Ctrl+Shift+T).
 
     ``<name>_BaseColor.png`` (sRGB), ``<name>_Roughness`` and
@@ -484,7 +489,7 @@ def write_blender(folder, maps, *, bits=8, fmt="png", force=False, extra=None, p
     prefix = blender_prefix(folder, name)
 
     def files(tmp):
-        f = _Files(tmp, bits, fmt, "blender", "OpenGL (+Y up)")
+        f = _Files(tmp, bits, fmt, "blender", "OpenGL (+Y up)", tileable)
         f.colour(f"{prefix}_BaseColor", base, "base colour")
         f.data(f"{prefix}_Roughness", rough, "roughness (Non-Color)")
         f.data(f"{prefix}_Metallic", metallic, "metallic (Non-Color)")
@@ -506,9 +511,11 @@ def write_preset(preset, folder, maps, **kwargs):
     """Write ``maps`` as the texture set ``preset`` (a key of :data:`PRESETS`).
 
     Keyword arguments: ``bits``, ``fmt``, ``force``, ``extra`` (a function
-    of the temporary folder that writes more files into the same atomic set)
-    and ``protect`` (paths the run reads: a folder holding one is never
-    replaced; see :func:`svbrdf_cli.atomic.write_set`).
+    of the temporary folder that writes more files into the same atomic set),
+    ``protect`` (paths the run reads: a folder holding one is never
+    replaced; see :func:`svbrdf_cli.atomic.write_set`), ``name`` (the
+    material's name in engine file names, :func:`asset_name`) and
+    ``tileable`` (the maps wrap: the height map is integrated periodically).
     """
     try:
         writer = PRESETS[preset]

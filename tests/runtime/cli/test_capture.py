@@ -124,3 +124,20 @@ def test_name_sets_the_engine_file_names_of_one_capture(tmp_path):
     assert "T_Oak_BC.png" in os.listdir(tmp_path / "o" / "IMG_0042")
     other = make_photo(tmp_path / "IMG_0043.png", seed=1)
     assert run("capture", photo, other, "-o", tmp_path / "p", "--name", "Oak")[0] == 2  # one name, two photos
+
+
+def test_tileable_capture(tmp_path):
+    from svbrdf_cli.tiling import wrap_ratio
+
+    from svbrdf_cli.imageio import write_image
+
+    rng = np.random.default_rng(0)
+    y, x = np.mgrid[0:400, 0:400]
+    plaster = 0.35 + 0.1 * rng.random((400, 400, 1)) + 0.1 * (x / 400.0)[..., None]  # texture and a gradient
+    hl = np.exp(-((x - 200) ** 2 + (y - 200) ** 2) / (2 * 30.0 ** 2))[..., None]
+    photo = tmp_path / "wall.png"
+    write_image(photo, np.clip(plaster * np.float32([1, 0.9, 0.8]) + 0.5 * hl, 0, 1).astype(np.float32))
+    code, out = run("capture", photo, "-o", tmp_path / "o", "--tileable", "--size", 256)
+    assert code == 0, out
+    assert json.loads((tmp_path / "o" / "wall" / "material.json").read_text())["tileable"] is True
+    assert wrap_ratio(read_image(tmp_path / "o" / "wall" / "diffuse.png")) <= 1.5
