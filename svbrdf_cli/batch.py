@@ -115,10 +115,10 @@ def describe_failure(f, e):
     return f"'{f}': unexpected {type(e).__name__}: {first} (rerun with -vv for details; please report it)."
 
 
-def run_local(files, job):
+def run_local(files, job, failures=None):
     """Convert ``files`` in this process; returns :class:`Counts`. Errors, log lines and (unless quiet)
     one line per converted photo go to stderr above the progress bar, which is shown only on a
-    terminal (a log file gets the lines alone)."""
+    terminal (a log file gets the lines alone); ``failures``, a list, also receives each error line."""
     from tqdm import tqdm
     from tqdm.contrib.logging import logging_redirect_tqdm
 
@@ -126,6 +126,8 @@ def run_local(files, job):
 
     def err(msg):
         tqdm.write(f"error: {msg}", file=sys.stderr)  # above the progress bar, never inside it
+        if failures is not None:
+            failures.append(msg)
 
     todo, skipped, failed = plan_inputs(files, job, err)
     if not todo:

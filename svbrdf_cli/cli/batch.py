@@ -6,6 +6,7 @@ import click
 
 from svbrdf_cli.batch import PHOTO_EXTENSIONS, collect_inputs, run_local
 from svbrdf_cli.cli.options import capture_options, finish
+from svbrdf_cli.gallery import write_gallery
 
 ENGINES = ("local", "ray")
 
@@ -24,7 +25,8 @@ def batch_cmd(folder, job, engine, address, workers):
     Photos whose texture set is already complete in OUTPUT are skipped (so an
     interrupted batch resumes where it stopped; --force redoes them). Sets are
     written whole or not at all, a bad photo is reported and skipped, and the
-    exit code is 1 if any photo failed.
+    exit code is 1 if any photo failed. OUTPUT/index.html shows every set in
+    the folder (photo, maps, preview) and this run's failures.
 
     \b
     Examples:
@@ -38,14 +40,21 @@ def batch_cmd(folder, job, engine, address, workers):
     files, ignored = collect_inputs([folder])
     if not files:
         raise click.UsageError(f"no photos in '{folder}' (looked for {', '.join(sorted(PHOTO_EXTENSIONS))} and RAW files).")
+    failures = []
     if engine == "ray":
         from tqdm import tqdm
 
         from svbrdf_cli.ray_engine import run_ray
 
-        counts = run_ray(files, job, address=address, workers=workers,
-                         err=lambda m: tqdm.write(f"error: {m}", file=sys.stderr))
-        finish(counts, ignored, job.quiet)
-    if "://" in job.output:
+        def err(msg):
+            tqdm.write(f"error: {msg}", file=sys.stderr)
+            failures.append(msg)
+
+        counts = run_ray(files, job, address=address, workers=workers, err=err)
+    elif "://" in job.output:
         raise click.UsageError(f"'{job.output}' is a URI: use --engine ray, or a local folder.")
-    finish(run_local(files, job), ignored, job.quiet)
+    else:
+        counts = run_local(files, job, failures)
+    if "://" not in job.output:
+        write_gallery(job.output, failures)  # index.html: every set in the folder, this run's failures
+    finish(counts, ignored, job.quiet)

@@ -51,7 +51,8 @@ def test_ray_engine_matches_the_local_engine(local_ray, photos, tmp_path):
     assert code == 1 and "4 done, 1 failed" in out, out
     errors = [line for line in out.splitlines() if line.startswith("error:")]
     assert len(errors) == 1 and "shot_broken.jpg" in errors[0]
-    assert sorted(os.listdir(tmp_path / "ray")) == sorted(os.listdir(tmp_path / "local")) == [f"shot{i}" for i in range(4)]
+    sets = ["index.html"] + [f"shot{i}" for i in range(4)]  # (index.html: the gallery)
+    assert sorted(os.listdir(tmp_path / "ray")) == sorted(os.listdir(tmp_path / "local")) == sets
     for i in range(4):
         for m in MAPS:
             a = read_image(tmp_path / "local" / f"shot{i}" / m)
@@ -70,7 +71,7 @@ def test_ray_engine_resumes(local_ray, photos, tmp_path):
     code, out = run("batch", photos, "-o", out_dir, "--engine", "ray")
     assert code == 1 and "3 done, 1 already done, 1 failed" in out, out
     assert (out_dir / "shot0" / "material.json").stat().st_mtime_ns == stamp
-    assert sorted(os.listdir(out_dir)) == [f"shot{i}" for i in range(4)]
+    assert sorted(os.listdir(out_dir)) == ["index.html"] + [f"shot{i}" for i in range(4)]
 
 
 def test_ray_engine_writes_to_a_uri(local_ray, photos, tmp_path):

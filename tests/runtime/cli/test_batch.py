@@ -50,7 +50,7 @@ def test_bad_inputs_get_one_line_errors_and_the_batch_goes_on(tmp_path):
     for name, words in expected.items():
         line = [e for e in errors if name in e]
         assert len(line) == 1 and words in line[0], (name, errors)
-    assert sorted(os.listdir(tmp_path / "out")) == ["good1", "good2"]  # nothing half-written, no temp folders
+    assert sorted(os.listdir(tmp_path / "out")) == ["good1", "good2", "index.html"]  # nothing half-written, no temp folders
     assert len(good) == 2 and "2 done" in out and f"{len(expected)} failed" in out
 
 
@@ -68,7 +68,7 @@ def test_accepted_variants_grey_16bit_alpha_cmyk(tmp_path):
     Image.fromarray(np.full((300, 300, 3), [230, 60, 50], np.uint8)).convert("CMYK").save(d / "cmyk.tif")
     code, text = run("batch", d, "-o", tmp_path / "out", "--no-preview")
     assert code == 0, text
-    assert sorted(os.listdir(tmp_path / "out")) == ["alpha", "cmyk", "grey", "p16"]
+    assert sorted(os.listdir(tmp_path / "out")) == ["alpha", "cmyk", "grey", "index.html", "p16"]
     rec = json.loads((tmp_path / "out" / "cmyk" / "material.json").read_text())
     assert rec["input"]["bits"] == 8
 
@@ -88,7 +88,7 @@ def test_batch_resumes_after_an_interruption(tmp_path):
     code, text = run("batch", d, "-o", out)
     assert code == 0 and "2 done, 1 already done" in text
     assert (out / "p0" / "material.json").read_text() == stamp  # skipped, untouched
-    assert sorted(os.listdir(out)) == ["p0", "p1", "p2"]
+    assert sorted(os.listdir(out)) == ["index.html", "p0", "p1", "p2"]
     code, text = run("batch", d, "-o", out)
     assert code == 0 and "0 done, 3 already done" in text
     code, text = run("batch", d, "-o", out, "--force")
@@ -117,7 +117,7 @@ def test_batch_interrupted_by_a_kill_leaves_only_complete_sets(tmp_path):
         if not name.startswith("."):
             assert (out / name / "material.json").exists(), name
     assert subprocess.run(cmd).returncode == 0
-    assert sorted(n for n in os.listdir(out)) == [f"p{i}" for i in range(6)]
+    assert sorted(n for n in os.listdir(out)) == ["index.html"] + [f"p{i}" for i in range(6)]
 
 
 
@@ -135,3 +135,24 @@ def test_a_batch_logged_to_a_file_is_one_line_per_photo(tmp_path):
     lines = r.stderr.splitlines()
     assert sum(" -> " in line for line in lines) == 4 and lines[-1] == "4 done"
     assert all(line.startswith(("WARNING:", "INFO:")) or " -> " in line or line == "4 done" for line in lines), lines
+
+
+def test_batch_writes_a_gallery_of_every_set_and_the_failures(tmp_path):
+    d = tmp_path / "in"
+    d.mkdir()
+    make_photo(d / "oak.png", seed=1)
+    make_photo(d / "slate.jpg", seed=2)
+    (d / "broken.jpg").write_bytes(b"\xff\xd8\xff not really")
+    out = tmp_path / "out"
+    code, _ = run("batch", d, "-o", out, "--preset", "unreal", "--size", 256)
+    assert code == 1
+    page = (out / "index.html").read_text()
+    assert "2 texture sets" in page and "broken.jpg" in page and 'class="err"' in page
+    for name in ("oak", "slate"):
+        assert f'src="{name}/T_{name}_BC.png"' in page and f'src="{name}/preview.png"' in page
+    assert 'src="../in/oak.png"' in page  # the photo, by a relative path
+    # resumed: the broken photo removed, the page lists the same sets and no failure
+    (d / "broken.jpg").unlink()
+    assert run("batch", d, "-o", out, "--preset", "unreal", "--size", 256)[0] == 0
+    page = (out / "index.html").read_text()
+    assert "2 texture sets" in page and "broken.jpg" not in page
