@@ -70,6 +70,7 @@ class Options:
     force: bool = False
     name: str | None = None                    # the material's name in engine file names (default: the photo's)
     tileable: bool = False                     # seamless maps (svbrdf_cli.tiling)
+    ao: bool = True                            # ambient occlusion from the height (engine presets)
 
 
 # --------------------------------------------------------------------------
@@ -374,7 +375,7 @@ def capture(prepared, chain, out_root, opts, model_name="fast"):
         return names + [RECORD]
 
     write_preset(opts.preset, folder, maps, bits=opts.bits, fmt=opts.fmt, force=opts.force, extra=extra,
-                 protect=(p.path,), name=opts.name, tileable=opts.tileable)
+                 protect=(p.path,), name=opts.name, tileable=opts.tileable, ao=opts.ao)
     return folder, record
 
 

@@ -16,12 +16,12 @@ svbrdf         normal.png diffuse.png roughness.png specular.png: the native
 gltf           baseColor.png (sRGB); metallicRoughness.png (linear: R = 1, i.e.
                no occlusion, G = roughness, B = metallic); normal.png (OpenGL,
                +Y up); height.png; material.gltf (one textured quad)
-unreal         BaseColor.png (sRGB); Normal.png (DirectX: green flipped, Y down);
-               ORM.png (linear: R = AO = 1, G = roughness, B = metallic);
-               Height.png
-unity-hdrp     BaseMap.png (sRGB); MaskMap.png (linear RGBA: R = metallic,
-               G = AO = 1, B = detail mask = 1, A = smoothness = 1 - roughness);
-               Normal.png (OpenGL); Height.png
+unreal         T_<Name>_BC.png (sRGB); T_<Name>_N.png (DirectX: green flipped, Y down);
+               T_<Name>_ORM.png (linear: R = ambient occlusion, G = roughness, B = metallic);
+               T_<Name>_H.png
+unity-hdrp     <Name>_BaseMap.png (sRGB); <Name>_MaskMap.png (linear RGBA: R = metallic,
+               G = ambient occlusion, B = detail mask = 1, A = smoothness = 1 - roughness);
+               <Name>_Normal.png (OpenGL); <Name>_Height.png
 blender        <name>_BaseColor.png (sRGB); <name>_Roughness.png,
                <name>_Metallic.png (Non-Color grey); <name>_Normal.png
                (OpenGL); <name>_Height.png
@@ -204,6 +204,55 @@ def normals_to_height(normals, tileable=False):
     return height[:h, :w].astype(np.float32)
 
 
+#: Ambient occlusion: horizon search in this many directions, out to these distances (pixels of a
+#: 1024 px map: the same share of any map's width), on the map at most AO_MAX_SIDE px (then resized).
+AO_DIRECTIONS = 8
+AO_STEPS = (1, 2, 4, 8, 16, 32)
+AO_MAX_SIDE = 512
+AO_NOTE = ("horizon-based, from the integrated height: 1 - mean over 8 directions of the sine of the highest "
+           "horizon within 32/1024 of the width")
+
+
+def ambient_occlusion(height, pixel, tileable=False):
+    """(H, W) ambient occlusion in [0, 1] of a height field (surface units, ``pixel`` wide pixels).
+
+    For each of :data:`AO_DIRECTIONS` directions, the highest horizon within :data:`AO_STEPS` pixels
+    (elevation angle of the neighbour's height over its distance) above the local tangent plane; the
+    unoccluded fraction is 1 minus the mean difference of their sines (1 on any plane, tilted or
+    not; lower in grooves and pores). Borders repeat
+    the edge (or wrap, for a ``tileable`` map).
+    """
+    import cv2
+
+    h, w = height.shape
+    scale = min(1.0, AO_MAX_SIDE / max(h, w))
+    hf = np.asarray(height, np.float32)
+    if scale < 1.0:
+        hf = cv2.resize(hf, (max(1, round(w * scale)), max(1, round(h * scale))), interpolation=cv2.INTER_AREA)
+    px = pixel / scale
+    hh, ww = hf.shape
+    steps = sorted({max(1, round(d * max(hh, ww) / 1024)) for d in AO_STEPS})  # the same share of any map
+    r = max(steps)
+    # beyond the border: the wrapped map when it tiles, else nothing (NaN neighbours are ignored)
+    padded = np.pad(hf, r, mode="wrap") if tileable else np.pad(hf, r, constant_values=np.nan)
+    gy, gx = np.gradient(hf, px)  # the local slope: horizons are measured above the tangent plane
+    occl = np.zeros_like(hf)
+    for k in range(AO_DIRECTIONS):
+        a = 2 * np.pi * k / AO_DIRECTIONS
+        tangent = gx * np.cos(a) + gy * np.sin(a)  # tan of the tangent plane's elevation that way
+        best = tangent.copy()
+        for d in steps:
+            dy, dx = int(round(d * np.sin(a))), int(round(d * np.cos(a)))
+            nb = padded[r + dy:r + dy + hh, r + dx:r + dx + ww]
+            best = np.fmax(best, (nb - hf) / (np.hypot(dx, dy) * px))  # tan of the horizon's elevation
+        sin = lambda t: t / np.sqrt(1.0 + t * t)  # noqa: E731
+        occl += sin(best) - sin(tangent)
+    ao = 1.0 - occl / AO_DIRECTIONS
+    if scale < 1.0:
+        ao = cv2.resize(ao, (w, h), interpolation=cv2.INTER_LINEAR)
+    return np.clip(ao, 0.0, 1.0).astype(np.float32)
+
+
 def height_to_unit(height):
     """Heights -> ([0, 1] map, depth): ``height = map * depth + offset``.
 
@@ -247,8 +296,9 @@ def _check_options(bits, fmt, png_only=None):
 class _Files:
     """Collects the images of one set in a temporary folder, plus their roles."""
 
-    def __init__(self, tmp, bits, fmt, preset, normal_convention, tileable=False):
-        self.tmp, self.bits, self.fmt, self.tileable = tmp, bits, fmt, tileable
+    def __init__(self, tmp, bits, fmt, preset, normal_convention, tileable=False, ao=True):
+        self.tmp, self.bits, self.fmt, self.tileable, self.use_ao = tmp, bits, fmt, tileable, ao
+        self._height = None
         self.names = []
         self.meta = {"generator": f"svbrdf {__version__}", "conventions_version": cv.CONVENTIONS_VERSION,
                      "preset": preset, "normal_map": normal_convention,
@@ -265,8 +315,22 @@ class _Files:
         else:
             self._write(stem + ".png", pixels, bits or self.bits, role, "linear")
 
+    def height_field(self, normals):
+        """The height integrated from ``normals`` (once per set)."""
+        if self._height is None:
+            self._height = normals_to_height(normals, tileable=self.tileable)
+        return self._height
+
+    def ao(self, normals):
+        """(H, W, 1) ambient occlusion from the height (:func:`ambient_occlusion`), or 1 without ``ao``."""
+        h, w = normals.shape[:2]
+        if not self.use_ao:
+            return np.ones((h, w, 1), np.float32)
+        self.meta["ambient_occlusion"] = AO_NOTE
+        return ambient_occlusion(self.height_field(normals), 2.0 * cv.SURFACE_HALF_SIZE / w, self.tileable)[..., None]
+
     def height(self, stem, normals):
-        unit, depth = height_to_unit(normals_to_height(normals, tileable=self.tileable))
+        unit, depth = height_to_unit(self.height_field(normals))
         self.data(stem, unit[..., None], "height", bits=HEIGHT_BITS)
         self.meta["height"] = {
             "file": self.names[-1], "depth": depth,
@@ -306,7 +370,7 @@ def _check_maps(maps):
 # --------------------------------------------------------------------------
 
 def write_svbrdf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=(), name=None,
-                 tileable=False):
+                 tileable=False, ao=True):
     """Native set: ``normal.png diffuse.png roughness.png specular.png`` and
     ``texture_set.json`` (their roles and encodings).
 
@@ -330,7 +394,7 @@ def write_svbrdf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, pr
 
     def files(tmp):
         mapset.write_map_set(tmp, maps, bits=bits)
-        f = _Files(tmp, bits, fmt, "svbrdf", "OpenGL (+Y up)", tileable)
+        f = _Files(tmp, bits, fmt, "svbrdf", "OpenGL (+Y up)", tileable, ao)
         for name, role in zip(cv.MAP_NAMES, ("normal", "diffuse albedo (stored^2.2 = linear)", "roughness",
                                               "specular F0 (stored^2.2 = linear)")):
             space = "sRGB" if name in ("diffuse", "specular") else "linear"
@@ -342,7 +406,7 @@ def write_svbrdf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, pr
 
 
 def write_gltf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=(), name=None,
-                 tileable=False):
+                 tileable=False, ao=True):
     """glTF 2.0 metallic-roughness set plus ``material.gltf`` (one textured quad).
 
     ``baseColor.png`` (sRGB), ``metallicRoughness.png`` (linear; R = 1 (no
@@ -359,10 +423,10 @@ def write_gltf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, prot
     base, metallic, rough = _metal_rough(maps)
 
     def files(tmp):
-        f = _Files(tmp, bits, fmt, "gltf", "OpenGL (+Y up)", tileable)
+        f = _Files(tmp, bits, fmt, "gltf", "OpenGL (+Y up)", tileable, ao)
         f.colour("baseColor", base, "base colour")
-        f.data("metallicRoughness", np.concatenate([np.ones_like(rough), rough, metallic], -1),
-               "R = 1 (no occlusion), G = roughness, B = metallic")
+        f.data("metallicRoughness", np.concatenate([f.ao(maps["normal"]), rough, metallic], -1),
+               "R = ambient occlusion (glTF occlusionTexture), G = roughness, B = metallic")
         f.data("normal", normals_to_opengl(maps["normal"]), "normal (OpenGL, +Y up)")
         f.height("height", maps["normal"])
         doc = gltf_document("baseColor.png", "metallicRoughness.png", "normal.png",
@@ -376,7 +440,7 @@ def write_gltf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, prot
 
 
 def write_unreal(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=(), name=None,
-                 tileable=False):
+                 tileable=False, ao=True):
     """Unreal Engine set, named as Unreal projects name textures: ``T_<Name>_BC`` (base colour, sRGB),
     ``T_<Name>_N`` (normal, DirectX), ``T_<Name>_ORM``, ``T_<Name>_H`` (height); ``<Name>`` is ``name``
     or the folder's (:func:`asset_name`), so sets imported into one folder never collide.
@@ -393,12 +457,12 @@ def write_unreal(folder, maps, *, bits=8, fmt="png", force=False, extra=None, pr
     base, metallic, rough = _metal_rough(maps)
 
     def files(tmp):
-        f = _Files(tmp, bits, fmt, "unreal", "DirectX (green flipped, Y down)", tileable)
+        f = _Files(tmp, bits, fmt, "unreal", "DirectX (green flipped, Y down)", tileable, ao)
         t = f"T_{asset_name(folder, name)}_"
         f.colour(t + "BC", base, "base colour")
         f.data(t + "N", normals_to_directx(maps["normal"]), "normal (DirectX, Y down)")
-        f.data(t + "ORM", np.concatenate([np.ones_like(rough), rough, metallic], -1),
-               "R = AO (1: none), G = roughness, B = metallic")
+        f.data(t + "ORM", np.concatenate([f.ao(maps["normal"]), rough, metallic], -1),
+               "R = ambient occlusion, G = roughness, B = metallic")
         f.height(t + "H", maps["normal"])
         return f.finish()
 
@@ -406,11 +470,11 @@ def write_unreal(folder, maps, *, bits=8, fmt="png", force=False, extra=None, pr
 
 
 def write_unity_hdrp(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=(), name=None,
-                 tileable=False):
+                 tileable=False, ao=True):
     """Unity HDRP Lit set: ``<Name>_BaseMap`` (sRGB), ``<Name>_MaskMap`` (RGBA), ``<Name>_Normal``,
     ``<Name>_Height``; ``<Name>`` is ``name`` or the folder's (:func:`asset_name`).
 
-    MaskMap is linear (import with sRGB off): R = metallic, G = AO (1),
+    MaskMap is linear (import with sRGB off): R = metallic, G = ambient occlusion,
     B = detail mask (1: a detail map, if one is added, applies everywhere),
     A = smoothness = 1 - roughness. Unity normal maps are OpenGL (+Y up).
 
@@ -423,11 +487,11 @@ def write_unity_hdrp(folder, maps, *, bits=8, fmt="png", force=False, extra=None
     one = np.ones_like(rough)
 
     def files(tmp):
-        f = _Files(tmp, bits, fmt, "unity-hdrp", "OpenGL (+Y up)", tileable)
+        f = _Files(tmp, bits, fmt, "unity-hdrp", "OpenGL (+Y up)", tileable, ao)
         t = f"{asset_name(folder, name)}_"
         f.colour(t + "BaseMap", base, "base colour")
-        f.data(t + "MaskMap", np.concatenate([metallic, one, one, 1.0 - rough], -1),
-               "R = metallic, G = AO (1), B = detail mask (1), A = smoothness = 1 - roughness")
+        f.data(t + "MaskMap", np.concatenate([metallic, f.ao(maps["normal"]), one, 1.0 - rough], -1),
+               "R = metallic, G = ambient occlusion, B = detail mask (1), A = smoothness = 1 - roughness")
         f.data(t + "Normal", normals_to_opengl(maps["normal"]), "normal (OpenGL, +Y up)")
         f.height(t + "Height", maps["normal"])
         return f.finish()
@@ -471,7 +535,7 @@ def blender_prefix(folder, name=None):
 
 
 def write_blender(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=(), name=None,
-                 tileable=False):
+                 tileable=False, ao=True):
     """Blender set, named for Node Wrangler's Principled Texture Setup (Ctrl+Shift+T).
 
     ``<name>_BaseColor.png`` (sRGB), ``<name>_Roughness`` and
@@ -489,7 +553,7 @@ def write_blender(folder, maps, *, bits=8, fmt="png", force=False, extra=None, p
     prefix = blender_prefix(folder, name)
 
     def files(tmp):
-        f = _Files(tmp, bits, fmt, "blender", "OpenGL (+Y up)", tileable)
+        f = _Files(tmp, bits, fmt, "blender", "OpenGL (+Y up)", tileable, ao)
         f.colour(f"{prefix}_BaseColor", base, "base colour")
         f.data(f"{prefix}_Roughness", rough, "roughness (Non-Color)")
         f.data(f"{prefix}_Metallic", metallic, "metallic (Non-Color)")
@@ -514,8 +578,10 @@ def write_preset(preset, folder, maps, **kwargs):
     of the temporary folder that writes more files into the same atomic set),
     ``protect`` (paths the run reads: a folder holding one is never
     replaced; see :func:`svbrdf_cli.atomic.write_set`), ``name`` (the
-    material's name in engine file names, :func:`asset_name`) and
-    ``tileable`` (the maps wrap: the height map is integrated periodically).
+    material's name in engine file names, :func:`asset_name`),
+    ``tileable`` (the maps wrap: the height map is integrated periodically)
+    and ``ao`` (ambient occlusion from the height in ORM, MaskMap and glTF's
+    occlusion channel; False: a constant 1).
     """
     try:
         writer = PRESETS[preset]
@@ -589,6 +655,7 @@ def gltf_document(base_colour, metallic_roughness, normal, name="material", extr
                                          "metallicRoughnessTexture": {"index": 1},
                                          "metallicFactor": 1.0, "roughnessFactor": 1.0},
                 "normalTexture": {"index": 2},
+                "occlusionTexture": {"index": 1},  # R of the metallicRoughness image
                 "doubleSided": True}
     if extras:
         material["extras"] = extras

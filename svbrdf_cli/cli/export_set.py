@@ -15,9 +15,10 @@ from svbrdf_cli.presets import PRESETS
 @format_opt("File format of linear data maps (normal, roughness, packed masks, height); "
             "exr writes 32-bit float. Base colour stays sRGB PNG.")
 @force_opt("an existing output folder (atomically)")
+@click.option("--no-ao", is_flag=True, help="Constant ambient occlusion (1) instead of one from the height.")
 @click.option("--name", default=None, help="The material's name in Unreal, Unity and Blender file names "
                                            "(default: the output folder's).")
-def export_cmd(mapset, output, preset, bits, fmt, force, name):
+def export_cmd(mapset, output, preset, bits, fmt, force, no_ao, name):
     """Write a native map set as an engine or DCC texture set, without re-running inference.
 
     Reads MAPSET (normal/diffuse/roughness/specular.png), converts the
@@ -38,6 +39,7 @@ def export_cmd(mapset, output, preset, bits, fmt, force, name):
 
     check_format(preset, fmt)
     maps = read_map_set(mapset)
-    paths = write_preset(preset, output, maps, bits=int(bits), fmt=fmt, force=force, protect=(mapset,), name=name)
+    paths = write_preset(preset, output, maps, bits=int(bits), fmt=fmt, force=force, protect=(mapset,), name=name,
+                         ao=not no_ao)
     h, w = maps["normal"].shape[:2]
     click.echo(f"wrote {output} ({preset}, {len(paths)} files, {w}x{h})", err=True)

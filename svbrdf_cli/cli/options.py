@@ -89,6 +89,7 @@ _CAPTURE_OPTIONS = [
                  help="Also write confidence/<map>.png: where the maps of rotated and mirrored copies of the "
                       "photo agree (white) or not (dark). Runs the networks 5 times."),
     click.option("--no-preview", is_flag=True, help="Skip preview.png."),
+    click.option("--no-ao", is_flag=True, help="Constant ambient occlusion (1) instead of one from the height."),
     click.option("--tileable", is_flag=True, help="Seamless maps: every map cross-faded with its half-shifted "
                                                   "copy near the borders, so the set tiles without a seam."),
     click.option("--threads", type=click.IntRange(0, 256), default=0, help="onnxruntime threads (0: one per core)."),
@@ -104,11 +105,12 @@ def capture_options(f):
     (:class:`svbrdf_cli.batch.Job`); verbosity is set before the command runs."""
     @functools.wraps(f)
     def command(*args, output, model, preset, crop, corners, size, exposure, white_balance, upsample, bits, fmt,
-                debug, confidence, no_preview, tileable, threads, force, name, quiet, verbose, **kwargs):
+                debug, confidence, no_preview, no_ao, tileable, threads, force, name, quiet, verbose, **kwargs):
         check_format(preset, fmt)
         opts = Options(preset=preset, crop=crop, corners=corners, size=size, exposure=exposure,
                        white_balance=white_balance, upsample=upsample, bits=int(bits), fmt=fmt, debug=debug,
-                       confidence=confidence, preview=not no_preview, force=force, name=name, tileable=tileable)
+                       confidence=confidence, preview=not no_preview, force=force, name=name, tileable=tileable,
+                       ao=not no_ao)
         job = Job(output=output, opts=opts, model=model, threads=threads, quiet=set_verbosity(quiet, verbose))
         return f(*args, job=job, **kwargs)
 

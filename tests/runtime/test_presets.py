@@ -175,7 +175,7 @@ def test_svbrdf_preset_is_exactly_the_native_set(maps, tmp_path):
 
 def test_gltf_layout(maps, tmp_path):
     out = tmp_path / "g"
-    presets.write_gltf(out, maps)
+    presets.write_gltf(out, maps, ao=False)
     assert sorted(os.listdir(out)) == ["baseColor.png", "height.png", "material.gltf",
                                        "metallicRoughness.png", "normal.png", "texture_set.json"]
     base = read_image(out / "baseColor.png")
@@ -190,7 +190,7 @@ def test_gltf_layout(maps, tmp_path):
 
 def test_unreal_layout(maps, tmp_path):
     out = tmp_path / "ue"
-    presets.write_unreal(out, maps, bits=16)
+    presets.write_unreal(out, maps, bits=16, ao=False)
     assert sorted(os.listdir(out)) == ["T_ue_BC.png", "T_ue_H.png", "T_ue_N.png", "T_ue_ORM.png", "texture_set.json"]
     presets.write_unreal(tmp_path / "other", maps, name="Oak Planks #2")
     assert "T_Oak_Planks_2_BC.png" in os.listdir(tmp_path / "other")
@@ -204,7 +204,7 @@ def test_unreal_layout(maps, tmp_path):
 
 def test_unity_hdrp_layout(maps, tmp_path):
     out = tmp_path / "u"
-    presets.write_unity_hdrp(out, maps)
+    presets.write_unity_hdrp(out, maps, ao=False)
     assert sorted(os.listdir(out)) == ["texture_set.json", "u_BaseMap.png", "u_Height.png", "u_MaskMap.png", "u_Normal.png"]
     mask = read_rgba(out / "u_MaskMap.png")
     assert mask.shape[-1] == 4
@@ -253,7 +253,7 @@ def test_blender_prefix_avoids_node_wrangler_tags(tmp_path):
 
 def test_exr_for_linear_data(maps, tmp_path):
     out = tmp_path / "ue"
-    presets.write_unreal(out, maps, fmt="exr")
+    presets.write_unreal(out, maps, fmt="exr", ao=False)
     assert sorted(os.listdir(out)) == ["T_ue_BC.png", "T_ue_H.exr", "T_ue_N.exr", "T_ue_ORM.exr", "texture_set.json"]
     orm = read_image(out / "T_ue_ORM.exr")
     np.testing.assert_allclose(right(orm), [1.0, 0.7, 1.0], atol=1e-6)
@@ -410,3 +410,35 @@ def test_data_maps_are_untagged_and_colour_maps_srgb(maps, tmp_path, preset):
         else:
             assert not {"sRGB", "gAMA", "cHRM", "iCCP"} & set(chunks), (name, chunks)
     assert "linear" in spaces
+
+
+def test_ambient_occlusion_darkens_grooves_only():
+    """1 on any plane (flat or tilted) and away from relief; below 1 inside a groove; a tileable map wraps."""
+    n = 128
+    pixel = 2.0 * cv.SURFACE_HALF_SIZE / n
+    x = np.arange(n, dtype=np.float32)[None, :] * np.ones((n, 1), np.float32)
+    assert presets.ambient_occlusion(np.zeros((n, n), np.float32), pixel).min() == 1.0
+    tilted = presets.ambient_occlusion(0.01 * x * pixel * 10, pixel)
+    assert tilted.min() > 0.98
+    groove = np.zeros((n, n), np.float32)
+    groove[:, 62:66] = -0.05  # a trench 4 px wide, 0.05 deep (surface units)
+    ao = presets.ambient_occlusion(groove, pixel)
+    assert ao[:, 62:66].mean() < 0.8 and ao[:, :40].min() > 0.99 and 0 <= ao.min()
+    wrapped = presets.ambient_occlusion(np.roll(groove, 64, axis=1), pixel, tileable=True)
+    np.testing.assert_allclose(np.roll(wrapped, -64, axis=1)[8:-8], ao[8:-8], atol=1e-5)  # (rows near the
+    # border differ: beyond it the wrapped map continues the groove, the other has nothing)
+
+
+def test_engine_presets_write_the_occlusion(maps, tmp_path):
+    bumpy = dict(maps)
+    y, x = np.mgrid[0:16, 0:16]
+    bumpy["normal"] = cv.normalize(np.stack([0.6 * np.sin(x / 1.5), 0.6 * np.cos(y / 1.5), np.ones((16, 16))], -1)
+                                   ).astype(np.float32)
+    presets.write_unreal(tmp_path / "ue", bumpy)
+    orm = read_image(tmp_path / "ue" / "T_ue_ORM.png")
+    assert orm[..., 0].min() < 0.95 and orm[..., 0].max() <= 1.0
+    presets.write_unreal(tmp_path / "flat", bumpy, ao=False)
+    assert read_image(tmp_path / "flat" / "T_flat_ORM.png")[..., 0].min() == 1.0
+    presets.write_gltf(tmp_path / "g", bumpy)
+    doc = json.loads((tmp_path / "g" / "material.gltf").read_text())
+    assert doc["materials"][0]["occlusionTexture"] == {"index": 1}

@@ -29,7 +29,7 @@ def right(img):
 def test_cli_export(tmp_path):
     mapset.write_map_set(tmp_path / "maps", _maps(), bits=16)
     out = tmp_path / "ue"
-    args = ["export", str(tmp_path / "maps"), "-o", str(out), "--preset", "unreal", "--bits", "16"]
+    args = ["export", str(tmp_path / "maps"), "-o", str(out), "--preset", "unreal", "--bits", "16", "--no-ao"]
     code, output = run(*args)
     assert code == 0, output
     orm = read_image(out / "T_ue_ORM.png")
