@@ -16,6 +16,9 @@ import numpy as np
 from svbrdf_cli.errors import ImageReadError, ImageWriteError
 
 _FORMATS = {8: "uint8", 16: "uint16", 32: "float"}
+#: zlib level of the PNGs we write: 1 writes a 1024² map in 128 ms against 202 ms at OpenImageIO's
+#: default (6), for files 3% larger (measured on a textured 8-bit map; docs/capture.md).
+PNG_COMPRESSION = 1
 
 
 def umask() -> int:
@@ -62,6 +65,22 @@ def read_image(path):
     return pixels
 
 
+def write_images(jobs, workers=2):
+    """Write several images at once, ``jobs`` a list of ``write_image`` argument tuples (path, pixels,
+    bits, colour), on ``workers`` threads (OpenImageIO encodes without holding the GIL). Every job is
+    finished before the first failure, if any, is raised."""
+    import concurrent.futures
+
+    if len(jobs) < 2 or workers < 2:
+        for job in jobs:
+            write_image(*job)
+        return
+    with concurrent.futures.ThreadPoolExecutor(max_workers=workers) as pool:
+        futures = [pool.submit(write_image, *job) for job in jobs]
+    for f in futures:
+        f.result()
+
+
 def write_image(path, pixels, bits=8, colour=True):
     """Write an image atomically.
 
@@ -105,6 +124,7 @@ def write_image(path, pixels, bits=8, colour=True):
         spec.attribute("oiio:UnassociatedAlpha", 1)
         if not colour:
             spec.attribute("oiio:ColorSpace", "Raw")  # PNG: no sRGB, gAMA or cHRM chunk
+        spec.attribute("png:compressionLevel", PNG_COMPRESSION)
         ok = out.open(tmp, spec) and out.write_image(a)
         out.close()
         if not ok:

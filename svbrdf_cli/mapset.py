@@ -14,7 +14,7 @@ import numpy as np
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.conventions import MAP_CHANNELS
 from svbrdf_cli.errors import MapSetError
-from svbrdf_cli.imageio import read_image, write_image
+from svbrdf_cli.imageio import read_image, write_images
 
 
 def stored_to_linear(stored, linear_albedo=False):
@@ -82,5 +82,5 @@ def read_map_set(folder, names=None, linear_albedo=False):
 def write_map_set(folder, maps, bits=8):
     """Write linear maps as a native map set (PNG, Des18 encoding)."""
     os.makedirs(folder, exist_ok=True)
-    for name, img in linear_to_stored(maps).items():
-        write_image(os.path.join(folder, name + ".png"), img, bits=bits, colour=name in ("diffuse", "specular"))
+    write_images([(os.path.join(folder, name + ".png"), img, bits, name in ("diffuse", "specular"))
+                  for name, img in linear_to_stored(maps).items()])

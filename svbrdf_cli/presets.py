@@ -299,6 +299,7 @@ class _Files:
     def __init__(self, tmp, bits, fmt, preset, normal_convention, tileable=False, ao=True):
         self.tmp, self.bits, self.fmt, self.tileable, self.use_ao = tmp, bits, fmt, tileable, ao
         self._height = None
+        self._jobs = []
         self.names = []
         self.meta = {"generator": f"svbrdf {__version__}", "conventions_version": cv.CONVENTIONS_VERSION,
                      "preset": preset, "normal_map": normal_convention,
@@ -340,12 +341,14 @@ class _Files:
             "integration": "Frankot-Chellappa from the normal map"}
 
     def _write(self, name, pixels, bits, role, space):
-        path = os.path.join(self.tmp, name)
-        imageio.write_image(path, pixels, bits=bits, colour=space == "sRGB")
+        # queued: finish() writes them all at once (imageio.write_images)
+        self._jobs.append((os.path.join(self.tmp, name), pixels, bits, space == "sRGB"))
         self.names.append(name)
         self.meta["files"][name] = {"role": role, "colour_space": space, "bits": bits}
 
     def finish(self, extra=None):
+        imageio.write_images(self._jobs)
+        self._jobs = []
         meta = dict(self.meta, **(extra or {}))
         with open(os.path.join(self.tmp, "texture_set.json"), "w") as f:
             json.dump(meta, f, indent=2)

@@ -1,3 +1,5 @@
+import os
+
 import numpy as np
 import pytest
 
@@ -60,3 +62,24 @@ def test_rgba_data_round_trips_unpremultiplied(tmp_path):
         write_image(tmp_path / f"m{bits}.png", img, bits=bits)
         back = read_image(tmp_path / f"m{bits}.png")
         assert np.allclose(back, img, atol=1 / 255), bits
+
+
+def test_write_images_writes_every_one_then_raises(tmp_path, monkeypatch):
+    from svbrdf_cli import imageio
+    from svbrdf_cli.errors import ImageWriteError
+
+    img = np.full((8, 8, 3), 0.5, np.float32)
+    imageio.write_images([(tmp_path / f"{i}.png", img, 8, True) for i in range(4)])
+    assert sorted(os.listdir(tmp_path)) == [f"{i}.png" for i in range(4)]
+    real = imageio.write_image
+
+    def fail_one(path, *args):
+        if str(path).endswith("1.png"):
+            raise ImageWriteError("disk full")
+        return real(path, *args)
+
+    monkeypatch.setattr(imageio, "write_image", fail_one)
+    (tmp_path / "b").mkdir()
+    with pytest.raises(ImageWriteError):
+        imageio.write_images([(tmp_path / "b" / f"{i}.png", img, 8, True) for i in range(4)])
+    assert sorted(os.listdir(tmp_path / "b")) == ["0.png", "2.png", "3.png"]

@@ -361,11 +361,10 @@ def test_failure_midway_leaves_nothing(maps, tmp_path, monkeypatch, preset):
             raise ImageWriteError(f"Could not write '{path}': disk full.")
         return real(path, pixels, bits=bits)
 
-    monkeypatch.setattr(imageio, "write_image", flaky)
-    monkeypatch.setattr(mapset, "write_image", flaky)
+    monkeypatch.setattr(imageio, "write_image", flaky)  # (imageio.write_images, used by every preset, calls it)
     with pytest.raises(ImageWriteError):
         presets.write_preset(preset, tmp_path / "out", maps)
-    assert len(calls) == 2 and os.listdir(tmp_path) == []
+    assert len(calls) >= 2 and os.listdir(tmp_path) == []  # (the maps are written at once: the others too)
 
 
 def test_failure_with_force_keeps_the_old_set(maps, tmp_path, monkeypatch):
