@@ -144,15 +144,15 @@ class StageTrainer:
         ck = torch.load(path, map_location=self.device, weights_only=False)
         if ck.get("stage") != self.stage:
             raise SvbrdfError(f"{path}: is a {ck.get('stage')!r} checkpoint, not {self.stage!r}")
-        if self.cfg.refine and ck.get("physical_version") != PHYSICAL_VERSION:
-            raise SvbrdfError(f"{path}: refines version {ck.get('physical_version')!r} of the physical estimate, "
-                              f"not the current {PHYSICAL_VERSION!r}")
+        # (weights trained on another version of the physical estimate start a run as well as any: the
+        # network adapts to the new estimate; the run itself records and exports the current version)
         own = self.net.stage(self.stage).state_dict()
         take = {k: v for k, v in ck["weights"].items() if k in own and own[k].shape == v.shape}
         self.net.stage(self.stage).load_state_dict(take, strict=False)
         self.init = {"from": os.path.abspath(path), "step": ck.get("step"), "tensors": len(take),
-                     "new_tensors": len(own) - len(take)}
-        return f"initialised from {path} (step {ck.get('step')}): {len(take)} tensors, {len(own) - len(take)} new"
+                     "new_tensors": len(own) - len(take), "physical_version": ck.get("physical_version")}
+        return (f"initialised from {path} (step {ck.get('step')}, estimate version {ck.get('physical_version')}): "
+                f"{len(take)} tensors, {len(own) - len(take)} new")
 
     def resume(self):
         if not os.path.exists(self.path):

@@ -46,7 +46,7 @@ from svbrdf_cli import conventions as cv
 
 #: Bumped whenever the estimate's output changes: a network trained to refine one version
 #: must be fed that version (written into exported models and checked when they load).
-PHYSICAL_VERSION = "3"
+PHYSICAL_VERSION = "4"
 
 #: Roughness values the lobe fit tries (the lobe's width picks one).
 ROUGHNESS_GRID = np.linspace(0.08, 1.0, 47)
@@ -77,6 +77,9 @@ METAL_MIN_GAIN = 0.3
 #: brightness, or that are clipped, take their diffuse from the surroundings (what is
 #: left of them after the highlight is taken off is dark and grey: a hole in the diffuse).
 HIGHLIGHT_SHARE = 0.8
+#: Under the highlight the fill takes the photo's texture (its brightness over its neighbourhood's),
+#: within this factor either way.
+DETAIL_RANGE = 1.5
 #: Under the highlight, subtracting white leaves the weakest channel at least this
 #: fraction of its value (so no channel empties and the hue is kept).
 SUBTRACT_FLOOR = 0.25
@@ -265,27 +268,38 @@ def flatten_radial(diffuse, rho, rings=PROFILE_RINGS // 2):
     return (diffuse * np.exp(-trend)[..., None]).astype(np.float32)
 
 
-def fill_from_surroundings(x, mask):
-    """``x`` (H, W, C) with the pixels of ``mask`` replaced from their surroundings (Telea inpainting)."""
+def fill_from_surroundings(x, mask, detail=None):
+    """``x`` (H, W, C) with the pixels of ``mask`` replaced from their surroundings by push-pull: masked
+    averages on a pyramid of halvings until nothing is missing, then back up, each level keeping its
+    own average where it had valid pixels (in proportion to them) and the coarser one elsewhere. A
+    smooth fill, without the radial streaks of boundary-marching inpainting; ``detail`` (H, W), when
+    given, multiplies the fill: the photo's own relative texture where it still has one."""
     import cv2
 
     if not mask.any():
         return x
-    if mask.mean() > 0.6:  # nothing left to fill from: the mean of the rest, or leave it
-        keep = ~mask
-        if keep.any():
-            x = x.copy()
-            x[mask] = x[keep].mean(0)
+    m = cv2.dilate(mask.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)  # the halo goes too
+    keep = (~m).astype(np.float32)
+    if not keep.any():
         return x
-    lo, hi = float(x.min()), float(x.max())
-    scale = max(hi - lo, 1e-6)
-    u8 = np.clip((x - lo) / scale * 65535.0, 0, 65535).astype(np.float32)
-    m = mask.astype(np.uint8)
-    r = max(3, int(round(x.shape[0] / 64)))
-    m = cv2.dilate(m, np.ones((3, 3), np.uint8))
-    out = np.stack([cv2.inpaint(np.ascontiguousarray((u8[..., c] / 257).astype(np.uint8)), m, r, cv2.INPAINT_TELEA)
-                    for c in range(x.shape[-1])], -1).astype(np.float32) * 257 / 65535.0 * scale + lo
-    return np.where(m[..., None].astype(bool), out, x)
+    x = np.asarray(x, np.float32)
+    num, den = x * keep[..., None], keep
+    pyramid = [(num, den)]
+    while min(den.shape) > 2 and float(den.min()) <= 0.0:
+        h, w = den.shape
+        size = (max(1, w // 2), max(1, h // 2))
+        num = cv2.resize(num, size, interpolation=cv2.INTER_AREA).reshape(size[1], size[0], -1)
+        den = cv2.resize(den, size, interpolation=cv2.INTER_AREA)
+        pyramid.append((num, den))
+    num, den = pyramid[-1]
+    fill = np.where(den[..., None] > 0, num / np.maximum(den, 1e-12)[..., None], x[~m].mean(0))
+    for num, den in reversed(pyramid[:-1]):
+        h, w = den.shape
+        up = cv2.resize(fill, (w, h), interpolation=cv2.INTER_LINEAR).reshape(h, w, -1)
+        fill = num + (1.0 - den)[..., None] * up  # den * (its own average) + (1 - den) * the coarser
+    if detail is not None:
+        fill = fill * detail[..., None]
+    return np.where(m[..., None], fill, x).astype(np.float32)
 
 
 def specular_map(fit, lin, clipped, dominated, intensity):
@@ -371,7 +385,11 @@ def estimate(image, geo=None, normal_strength=None, with_fit=False, metals=None)
     white = np.minimum(share * lum[..., None], (1.0 - SUBTRACT_FLOOR) * (lin / tint).min(-1, keepdims=True))
     diffuse = (lin - white * tint) / (geo.intensity * shading[..., None]) / keep
     bad = clipped | (share[..., 0] > HIGHLIGHT_SHARE)  # what is left there is mostly the highlight's
-    diffuse = fill_from_surroundings(np.clip(diffuse, 0.0, None).astype(np.float32), bad)
+    # the texture under the highlight: the photo's brightness relative to its neighbourhood (the lobe is
+    # smooth at that scale), none where it clipped
+    rel = np.clip(lum / np.maximum(_blur(lum, max(1.0, w / 64.0)), 1e-6), 1.0 / DETAIL_RANGE, DETAIL_RANGE)
+    rel = np.where(clipped, 1.0, rel).astype(np.float32)
+    diffuse = fill_from_surroundings(np.clip(diffuse, 0.0, None).astype(np.float32), bad, rel)
     diffuse = flatten_radial(diffuse, rho)
     diffuse = np.clip(np.nan_to_num(diffuse, nan=0.0, posinf=1.0), 0.0, 1.0).astype(np.float32)
     light_xy = np.stack([foot[0] - x, foot[1] - y], -1) / d[..., None]
