@@ -30,6 +30,7 @@ from torch import nn
 from export.nets.chain import VARIANTS
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.inference import PHYSICAL_INPUT
+from svbrdf_cli.errors import SvbrdfError
 from svbrdf_cli.physical import PHYSICAL_VERSION
 
 OPSET = 19
@@ -193,6 +194,11 @@ def export_run(run, out, size=256, weights="float16"):
 
     net = load_trained(run)
     prov = read_json(os.path.join(run, "provenance.json"))
+    trained_on = {s.get("physical_version") for s in prov.get("stages", {}).values() if s.get("refine")}
+    if trained_on - {PHYSICAL_VERSION}:  # the runtime would feed it another estimate than it learnt to refine
+        raise SvbrdfError(f"{run}: trained to refine version {', '.join(sorted(map(str, trained_on)))} of the "
+                          f"physical estimate; this tool computes version {PHYSICAL_VERSION}. Train it on this "
+                          "version (python -m export.train --init-from RUN ...) before exporting it.")
     os.makedirs(out, exist_ok=True)
     stages = VARIANTS[getattr(net, "variant", "chain")]
     paths = [export_stage(net, s, os.path.join(out, f"{s}.onnx"), size, {"provenance": prov}, weights=weights)

@@ -165,3 +165,20 @@ def test_untrained_refining_models_return_the_physical_estimate(tmp_path):
             ref = net(torch.from_numpy(img).permute(2, 0, 1)[None])
         for k, v in est.items():
             assert np.abs(ref[k][0].permute(1, 2, 0).numpy() - v).max() < 1e-5, (name, k)
+
+
+def test_a_run_on_another_estimate_version_is_not_exported(tmp_path):
+    """A refining run trained on another version of the physical estimate would be fed an estimate it never
+    learnt: exporting it is refused (the runtime would refuse to load it too)."""
+    from export.files import read_json, write_json
+    from export.onnx_export import export_run
+    from export.train import RunConfig, train_stage
+    from svbrdf_cli.errors import SvbrdfError
+
+    cfg = RunConfig(tier="lite", variant="e2e", size=32, batch=2, val_samples=2)
+    train_stage("maps", str(tmp_path / "run"), cfg, steps=1, progress=False, log=lambda *a: None)
+    prov = read_json(tmp_path / "run" / "provenance.json")
+    prov["stages"]["maps"]["physical_version"] = "0"
+    write_json(tmp_path / "run" / "provenance.json", prov)
+    with pytest.raises(SvbrdfError, match="version 0"):
+        export_run(str(tmp_path / "run"), str(tmp_path / "out"))
