@@ -126,6 +126,23 @@ def write_set(folder, write_files, force, extra=None, protect=()):
     return [os.path.join(folder, n) for n in names]
 
 
+def write_text(path, text):
+    """Write a text file atomically (a temporary file beside it, renamed over it), mode as ``open`` gives."""
+    from svbrdf_cli.imageio import umask
+
+    folder = os.path.dirname(os.path.abspath(path))
+    fd, tmp = tempfile.mkstemp(prefix=".svbrdf-", suffix=os.path.splitext(path)[1], dir=folder)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+        os.chmod(tmp, 0o666 & ~umask())  # mkstemp makes it 0600
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return path
+
+
 def _alive(pid):
     try:
         os.kill(pid, 0)

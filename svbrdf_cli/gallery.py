@@ -11,9 +11,8 @@ from __future__ import annotations
 import html
 import json
 import os
-import tempfile
 
-from svbrdf_cli.atomic import SET_MARKERS
+from svbrdf_cli.atomic import SET_MARKERS, write_text
 
 #: The gallery's file name in the output folder.
 GALLERY = "index.html"
@@ -100,13 +99,4 @@ def write_gallery(out, failures=()):
     """Write (atomically) ``out/index.html``; returns its path, or None when ``out`` is not a folder."""
     if not os.path.isdir(out):
         return None
-    path = os.path.join(out, GALLERY)
-    fd, tmp = tempfile.mkstemp(prefix=".svbrdf-", suffix=".html", dir=out)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(render(out, failures))
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return path
+    return write_text(os.path.join(out, GALLERY), render(out, failures))

@@ -41,8 +41,9 @@ def _register():
     from svbrdf_cli.cli.export_set import export_cmd
     from svbrdf_cli.cli.markers import markers_cmd
     from svbrdf_cli.cli.render import render_cmd
+    from svbrdf_cli.cli.view import view_cmd
 
-    for cmd in (capture_cmd, batch_cmd, export_cmd, render_cmd, markers_cmd):
+    for cmd in (capture_cmd, batch_cmd, export_cmd, render_cmd, view_cmd, markers_cmd):
         cli.add_command(cmd)
 
 
