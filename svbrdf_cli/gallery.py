@@ -83,7 +83,9 @@ def render(out, failures=()):
         if os.path.isfile(os.path.join(folder, "preview.png")):
             cells.append(_figure(f"{name}/preview.png", "preview: maps and relit", "preview"))
         model = (record.get("model") or {}).get("tier", "")
-        head = (f'<a href="{html.escape(name)}/">{html.escape(name)}</a><br>'
+        viewer = (f'<br><a href="{html.escape(name)}/viewer.html">viewer</a>'
+                  if os.path.isfile(os.path.join(folder, "viewer.html")) else "")  # (svbrdf view SET)
+        head = (f'<a href="{html.escape(name)}/">{html.escape(name)}</a>{viewer}<br>'
                 f'<figcaption>{html.escape(str(model))} {html.escape(str(record.get("size", "")))}</figcaption>')
         rows.append("<tr><th>" + head + "</th>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
     fails = "".join(f'<li class="err">{html.escape(f)}</li>' for f in failures)

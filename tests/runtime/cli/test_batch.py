@@ -151,8 +151,10 @@ def test_batch_writes_a_gallery_of_every_set_and_the_failures(tmp_path):
     for name in ("oak", "slate"):
         assert f'src="{name}/T_{name}_BC.png"' in page and f'src="{name}/preview.png"' in page
     assert 'src="../in/oak.png"' in page  # the photo, by a relative path
-    # resumed: the broken photo removed, the page lists the same sets and no failure
+    assert "viewer.html" not in page
+    # resumed: the broken photo removed, the page lists the same sets and no failure (and oak's viewer)
     (d / "broken.jpg").unlink()
+    (out / "oak" / "viewer.html").write_text("<html></html>")
     assert run("batch", d, "-o", out, "--preset", "unreal", "--size", 256)[0] == 0
     page = (out / "index.html").read_text()
-    assert "2 texture sets" in page and "broken.jpg" not in page
+    assert "2 texture sets" in page and "broken.jpg" not in page and 'href="oak/viewer.html"' in page
