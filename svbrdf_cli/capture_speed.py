@@ -122,6 +122,54 @@ def _throughput(count, model):
         print(f"| {engine} | {dt:.1f} | {count / dt:.2f} | {rows[0][1] / dt:.2f} |")
 
 
+def _ratio_row(label, whole, networks, peak):
+    print(f"| {label} | {whole:.3f} | {networks:.3f} | {whole / max(networks, 1e-9):.2f} | {peak:.0f} |")
+
+
+def _ratios(model, threads, repeat, dng=None):
+    """Issue 19's cases, each in its own process: the whole capture's seconds over its model's (the
+    ``network`` stage of ``material.json``), measured in the same run, and the peak memory."""
+    import shutil
+
+    print(f"model {model}; {os.cpu_count()} cores; median of {repeat} after a warm-up; each case in its own process")
+    print("| case | whole s | model s | whole / model | peak MB |")
+    print("|---|---|---|---|---|")
+    def make(path, w, h):  # in a process of its own: Linux keeps a parent's peak memory across fork and exec
+        subprocess.run([sys.executable, "-c", "import sys; from svbrdf_cli.capture_speed import _synthetic_photo; "
+                        f"_synthetic_photo(sys.argv[1], {w}, {h})", path], check=True)
+
+    with tempfile.TemporaryDirectory() as tmp:
+        for key, (w, h) in {"12mp": (4000, 3000), "48mp": (8000, 6000)}.items():
+            make(os.path.join(tmp, f"{key}.jpg"), w, h)
+        cases = [("12 MP JPEG, default size", "12mp.jpg", None), ("12 MP JPEG, --size 2048", "12mp.jpg", 2048),
+                 ("48 MP JPEG, default size", "48mp.jpg", None)]
+        if dng:
+            cases.append((f"RAW {os.path.basename(dng)}, default size", dng, None))
+        for label, photo, size in cases:
+            r = _spawn({"photo": os.path.join(tmp, photo), "size": size, "upsample": "guided", "model": model,
+                        "threads": threads, "repeat": repeat})
+            _ratio_row(label, r["timings"]["total"], r["timings"]["network"], r["peak_rss_mb"])
+        for side in (256, 1024):
+            src = os.path.join(tmp, f"batch{side}")
+            os.makedirs(src)
+            make(os.path.join(src, "p000.jpg"), side, side)
+            for i in range(1, 40):
+                shutil.copy(os.path.join(src, "p000.jpg"), os.path.join(src, f"p{i:03d}.jpg"))
+            one = _spawn({"photo": os.path.join(src, "p000.jpg"), "size": side, "upsample": "guided", "model": model,
+                          "threads": threads, "repeat": repeat})
+            cmd = [sys.executable, "-m", "svbrdf_cli.cli.main", "batch", src, "-o", os.path.join(tmp, f"out{side}"),
+                   "--model", model, "--size", str(side), "--threads", str(threads), "-q"]
+            peak = ("import resource, subprocess, sys; r = subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL); "
+                    "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss); sys.exit(r.returncode)")
+            t0 = time.perf_counter()
+            r = subprocess.run([sys.executable, "-c", peak, *cmd], capture_output=True, text=True)
+            wall = (time.perf_counter() - t0) / 40
+            if r.returncode:
+                raise SystemExit(f"error: batch failed: {r.stderr.strip()[-300:]}")
+            _ratio_row(f"batch of 40 at {side}², per photo (start-up included)", wall, one["timings"]["network"],
+                       int(r.stdout.split()[-1]) / 1024)
+
+
 def _arguments(argv=None):
     p = argparse.ArgumentParser(prog="python -m svbrdf_cli.capture_speed",
                                 description="Time the capture job by stage at several output sizes, with peak memory.")
@@ -133,6 +181,10 @@ def _arguments(argv=None):
     p.add_argument("--json", dest="json_out", default=None, help="Also write the figures here.")
     p.add_argument("--throughput", type=int, default=0,
                    help="Instead: time 'svbrdf batch' on this many 1600x1200 JPEGs, local engine vs Ray.")
+    p.add_argument("--ratios", action="store_true",
+                   help="Instead: issue 19's cases (12 MP at the default size and 2048, 48 MP, --dng, batches of 40 "
+                        "at 256 and 1024), the whole capture over its model's time, and peak memory.")
+    p.add_argument("--dng", default=None, help="With --ratios: a RAW file to add as a case.")
     p.add_argument("--child", default=None, help=argparse.SUPPRESS)
     a = p.parse_args(argv)
     if a.photo is not None and not os.path.isfile(a.photo):
@@ -145,6 +197,8 @@ def main(argv=None):
     a = _arguments(argv)
     photo, sizes, repeat, model, threads = a.photo, a.sizes, a.repeat, a.model, a.threads
     json_out, child, throughput = a.json_out, a.child, a.throughput
+    if a.ratios:
+        return _ratios(model, threads, repeat, a.dng)
     if throughput:
         return _throughput(throughput, model)
     if child:
