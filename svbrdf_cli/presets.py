@@ -544,8 +544,9 @@ def write_blender(folder, maps, *, bits=8, fmt="png", force=False, extra=None, p
     ``<name>_BaseColor.png`` (sRGB), ``<name>_Roughness`` and
     ``<name>_Metallic`` (grey, set the Image nodes to Non-Color),
     ``<name>_Normal`` (OpenGL, Blender's Normal Map node default, Non-Color),
-    ``<name>_Height`` (Non-Color, for a Displacement node). ``<name>`` is
-    :func:`blender_prefix` of the folder.
+    ``<name>_Height`` (Non-Color, for a Displacement node) and, with ``ao``,
+    ``<name>_AO`` (Non-Color; Node Wrangler multiplies it into the base colour).
+    ``<name>`` is :func:`blender_prefix` of the folder.
 
     Returns:
         Written paths.
@@ -562,6 +563,8 @@ def write_blender(folder, maps, *, bits=8, fmt="png", force=False, extra=None, p
         f.data(f"{prefix}_Metallic", metallic, "metallic (Non-Color)")
         f.data(f"{prefix}_Normal", normals_to_opengl(maps["normal"]), "normal (OpenGL, Non-Color)")
         f.height(f"{prefix}_Height", maps["normal"])
+        if ao:
+            f.data(f"{prefix}_AO", f.ao(maps["normal"]), "ambient occlusion (Non-Color)")
         return f.finish()
 
     return write_set(folder, files, force, extra, protect)

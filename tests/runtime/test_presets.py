@@ -231,15 +231,17 @@ def test_blender_layout_and_node_wrangler_names(maps, tmp_path):
     out = tmp_path / "set"
     presets.write_blender(out, maps)
     names = sorted(os.listdir(out))
-    assert names == ["set_BaseColor.png", "set_Height.png", "set_Metallic.png", "set_Normal.png",
+    assert names == ["set_AO.png", "set_BaseColor.png", "set_Height.png", "set_Metallic.png", "set_Normal.png",
                      "set_Roughness.png", "texture_set.json"]
+    presets.write_blender(tmp_path / "noao", maps, ao=False)
+    assert "noao_AO.png" not in os.listdir(tmp_path / "noao")
     assert abs(left(read_image(out / "set_BaseColor.png")) - 0.4845).max() <= 1 / 255
     rough, metal = read_image(out / "set_Roughness.png"), read_image(out / "set_Metallic.png")
     assert rough.shape[-1] == 1 and metal.shape[-1] == 1
     assert abs(left(rough)[0] - 0.3) <= 1 / 255 and abs(right(metal)[0] - 1.0) <= 1 / 255 and left(metal)[0] == 0
     # Each file carries exactly one Node Wrangler tag group.
     groups = {"base": {"base", "color", "basecolor"}, "rough": {"roughness"}, "metal": {"metallic"},
-              "normal": {"normal"}, "height": {"height"}}
+              "normal": {"normal"}, "height": {"height"}, "ao": {"ao"}}
     for name in names[:-1]:
         hits = [g for g, tags in groups.items() if set(presets.name_components(name)) & tags]
         assert len(hits) == 1, (name, hits)
