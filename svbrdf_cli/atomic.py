@@ -21,6 +21,7 @@ import shutil
 import tempfile
 
 from svbrdf_cli.errors import ImageWriteError
+from svbrdf_cli.imageio import umask
 
 #: A folder holding one of these was written by svbrdf: ``texture_set.json`` by every preset,
 #: ``material.json`` by ``svbrdf capture``.
@@ -100,8 +101,6 @@ def write_set(folder, write_files, force, extra=None, protect=()):
         names = write_files(tmp)
         if extra is not None:
             names = names + extra(tmp)
-        from svbrdf_cli.imageio import umask
-
         os.chmod(tmp, 0o777 & ~umask())  # mkdtemp makes it 0700
         with _locked(parent):
             check_replaceable(folder, force, protect)  # again: another run may have written it meanwhile
@@ -128,8 +127,6 @@ def write_set(folder, write_files, force, extra=None, protect=()):
 
 def write_text(path, text):
     """Write a text file atomically (a temporary file beside it, renamed over it), mode as ``open`` gives."""
-    from svbrdf_cli.imageio import umask
-
     folder = os.path.dirname(os.path.abspath(path))
     fd, tmp = tempfile.mkstemp(prefix=".svbrdf-", suffix=os.path.splitext(path)[1], dir=folder)
     try:

@@ -93,16 +93,21 @@ def _spawn(args):
     return json.loads(r.stdout.strip().splitlines()[-1])
 
 
-def _throughput(count, model):
-    """Wall-clock photos/s of ``svbrdf batch`` (a fresh process each), local engine then Ray."""
+def _copies(folder, count):
+    """``folder/p000.jpg`` copied to p001 ... so that the folder holds ``count`` photos (a batch)."""
     import shutil
 
+    for i in range(1, count):
+        shutil.copy(os.path.join(folder, "p000.jpg"), os.path.join(folder, f"p{i:03d}.jpg"))
+
+
+def _throughput(count, model):
+    """Wall-clock photos/s of ``svbrdf batch`` (a fresh process each), local engine then Ray."""
     with tempfile.TemporaryDirectory() as tmp:
         src = os.path.join(tmp, "in")
         os.makedirs(src)
         _synthetic_photo(os.path.join(src, "p000.jpg"), 1600, 1200)
-        for i in range(1, count):
-            shutil.copy(os.path.join(src, "p000.jpg"), os.path.join(src, f"p{i:03d}.jpg"))
+        _copies(src, count)
         print(f"{count} photos 1600x1200 JPEG -> 1024 px native sets with previews; model {model}; "
                    f"{os.cpu_count()} cores; wall clock of the whole command (start-up included)")
         rows = []
@@ -129,8 +134,6 @@ def _ratio_row(label, whole, networks, peak):
 def _ratios(model, threads, repeat, dng=None):
     """Issue 19's cases, each in its own process: the whole capture's seconds over its model's (the
     ``network`` stage of ``material.json``), measured in the same run, and the peak memory."""
-    import shutil
-
     print(f"model {model}; {os.cpu_count()} cores; median of {repeat} after a warm-up; each case in its own process")
     print("| case | whole s | model s | whole / model | peak MB |")
     print("|---|---|---|---|---|")
@@ -153,8 +156,7 @@ def _ratios(model, threads, repeat, dng=None):
             src = os.path.join(tmp, f"batch{side}")
             os.makedirs(src)
             make(os.path.join(src, "p000.jpg"), side, side)
-            for i in range(1, 40):
-                shutil.copy(os.path.join(src, "p000.jpg"), os.path.join(src, f"p{i:03d}.jpg"))
+            _copies(src, 40)
             one = _spawn({"photo": os.path.join(src, "p000.jpg"), "size": side, "upsample": "guided", "model": model,
                           "threads": threads, "repeat": repeat})
             cmd = [sys.executable, "-m", "svbrdf_cli.cli.main", "batch", src, "-o", os.path.join(tmp, f"out{side}"),

@@ -65,7 +65,8 @@ def load_photo(path, white_balance=None, min_side=None):
     if os.path.getsize(path) == 0:
         raise ImageReadError(f"Could not read '{path}': the file is empty. Copy it from the camera again.")
     ext = os.path.splitext(path)[1].lower()
-    photo = _load_raw(path, min_side) if ext in RAW_EXTENSIONS else _load_image(path, min_side)
+    with _openable(path) as name:  # (``name``: what the decoders open; messages name ``path``)
+        photo = _load_raw(path, name, min_side) if ext in RAW_EXTENSIONS else _load_image(path, name, min_side)
     _check_exposed(path, photo.linear)
     if white_balance is not None:
         photo.linear = photo.linear * np.asarray(white_balance, np.float32).reshape(1, 1, 3)
@@ -86,11 +87,11 @@ def encode_for_network(linear):
     return cv.image_to_encoded(np.asarray(linear, np.float32)).astype(np.float32)
 
 
-def _load_raw(path, min_side=None):
+def _load_raw(path, name, min_side=None):
     import rawpy
 
     try:
-        with rawpy.imread(path) as raw:
+        with rawpy.imread(name) as raw:
             factor = _reduction(raw.sizes.width, raw.sizes.height, min_side)
             # half-size demosaicing (each 2x2 Bayer block one pixel) when half the size is enough
             rgb = raw.postprocess(use_camera_wb=True, no_auto_bright=True, output_bps=16, gamma=(1, 1),
@@ -155,8 +156,8 @@ def _truncated(path, kind):
 
 @contextlib.contextmanager
 def _openable(path):
-    """A name OpenImageIO and OpenCV can open for ``path``: itself, or for a name that is not valid
-    UTF-8 (which both libraries mangle) a link to it with a plain name in a temporary folder."""
+    """A name the decoders (OpenImageIO, OpenCV, LibRaw) can open for ``path``: itself, or for a name
+    that is not valid UTF-8 (which they mangle) a link to it with a plain name in a temporary folder."""
     try:
         path.encode("utf-8")
         yield path
@@ -229,7 +230,7 @@ def _decode_strips(inp, spec, factor):
     return out
 
 
-def _load_image(path, min_side=None):
+def _load_image(path, name, min_side=None):
     import OpenImageIO as oiio
 
     kind = _sniff(path)
@@ -241,37 +242,36 @@ def _load_image(path, min_side=None):
                              "Copy it from the camera again.")
     config = oiio.ImageSpec()
     config.attribute("oiio:UnassociatedAlpha", 1)  # colour as stored, alpha apart (never premultiplied)
-    with _openable(path) as name:
-        inp = oiio.ImageInput.open(name, config)
-        if inp is None:
-            why = (oiio.geterror().strip().splitlines() or ["unknown format"])[0]
-            raise ImageReadError(f"Could not read '{path}': {why}. Use a JPEG, PNG, TIFF, EXR or camera RAW file.")
-        try:
-            spec = inp.spec()
-            w, h = spec.width, spec.height
-            _check_size(path, kind, w, h)
-            factor = _reduction(w, h, min_side)
-            orientation = spec.get_int_attribute("Orientation", 1)
-            fmt = str(spec.format)
-            floating = fmt in ("half", "float", "double")
-            bits = {"uint8": 8, "uint16": 16, "half": 16, "float": 32}.get(fmt, 8)
-            if kind == "jpeg" and factor > 1:
-                inp.close()
-                inp = None
-                rgb = _decode_jpeg_reduced(name, factor)  # oriented by OpenCV
-                if rgb is None:
-                    raise ImageReadError(f"Could not decode '{path}'. The file may be damaged; export it again.")
-                rgb, alpha, orientation, bits, floating = _SRGB8_TO_LINEAR[rgb], None, 1, 8, None
-            else:
-                px = _decode_strips(inp, spec, factor)
-                if px is None:
-                    why = (oiio.geterror().strip().splitlines() or ["truncated data"])[0]
-                    raise ImageReadError(f"Could not decode '{path}': {why}. The file may be damaged; export it again.")
-                rgb, alpha = _channels(px, spec)
-                del px
-        finally:
-            if inp is not None:
-                inp.close()
+    inp = oiio.ImageInput.open(name, config)
+    if inp is None:
+        why = (oiio.geterror().strip().splitlines() or ["unknown format"])[0]
+        raise ImageReadError(f"Could not read '{path}': {why}. Use a JPEG, PNG, TIFF, EXR or camera RAW file.")
+    try:
+        spec = inp.spec()
+        w, h = spec.width, spec.height
+        _check_size(path, kind, w, h)
+        factor = _reduction(w, h, min_side)
+        orientation = spec.get_int_attribute("Orientation", 1)
+        fmt = str(spec.format)
+        floating = fmt in ("half", "float", "double")
+        bits = {"uint8": 8, "uint16": 16, "half": 16, "float": 32}.get(fmt, 8)
+        if kind == "jpeg" and factor > 1:
+            inp.close()
+            inp = None
+            rgb = _decode_jpeg_reduced(name, factor)  # oriented by OpenCV
+            if rgb is None:
+                raise ImageReadError(f"Could not decode '{path}'. The file may be damaged; export it again.")
+            rgb, alpha, orientation, bits, floating = _SRGB8_TO_LINEAR[rgb], None, 1, 8, None
+        else:
+            px = _decode_strips(inp, spec, factor)
+            if px is None:
+                why = (oiio.geterror().strip().splitlines() or ["truncated data"])[0]
+                raise ImageReadError(f"Could not decode '{path}': {why}. The file may be damaged; export it again.")
+            rgb, alpha = _channels(px, spec)
+            del px
+    finally:
+        if inp is not None:
+            inp.close()
     if factor > 1:
         log.info("'%s' is %dx%d: decoded at 1/%d (%dx%d), all the output needs", path, w, h, factor,
                  w // factor, h // factor)

@@ -233,13 +233,14 @@ def fit_lobe(lum, clipped, rho, geo, metals=False):
     res_d = (w * (prof - c0[..., None] * s - c1[..., None] * g) ** 2).sum(-1)
     i = np.unravel_index(int(np.argmin(res_d)), res_d.shape)
     best_d = (float(res_d[i]), float(ROUGHNESS_GRID[i[1]]), float(heights[i[0]]), float(c0[i]), float(c1[i]))
-    # metal: c0, c1 >= 0, no bound on the lobe
-    res_m = (w * (prof - m0[..., None] * s - m1[..., None] * g) ** 2).sum(-1)
-    res_m = np.where((m0 >= 0) & (m1 > 0), res_m, np.inf)
-    j = np.unravel_index(int(np.argmin(res_m)), res_m.shape)
-    best_m = None if not np.isfinite(res_m[j]) else \
-        (float(res_m[j]), float(ROUGHNESS_GRID[j[1]]), float(heights[j[0]]), float(m0[j]), float(m1[j]))
-    metal = (metals and best_m is not None and best_m[4] / P > METAL_MIN_F0 and best_m[3] / P < METAL_MAX_DIFFUSE * best_m[4] / P
+    best_m = None
+    if metals:  # metal: c0, c1 >= 0, no bound on the lobe
+        res_m = (w * (prof - m0[..., None] * s - m1[..., None] * g) ** 2).sum(-1)
+        res_m = np.where((m0 >= 0) & (m1 > 0), res_m, np.inf)
+        j = np.unravel_index(int(np.argmin(res_m)), res_m.shape)
+        if np.isfinite(res_m[j]):
+            best_m = (float(res_m[j]), float(ROUGHNESS_GRID[j[1]]), float(heights[j[0]]), float(m0[j]), float(m1[j]))
+    metal = (best_m is not None and best_m[4] / P > METAL_MIN_F0 and best_m[3] / P < METAL_MAX_DIFFUSE * best_m[4] / P
              and best_m[0] < (1.0 - METAL_MIN_GAIN) * best_d[0])
     res, r, h, c0, c1 = best_m if metal else best_d
     return Lobe(float(r), c0, c1, float(h), bool(metal), 1.0 - res / max(res_flat, 1e-20))
@@ -332,6 +333,8 @@ def normal_map(lum_albedo, light_xy, light_z, strength=None, scale=HEIGHT_SCALE)
     """
     strength = NORMAL_STRENGTH if strength is None else strength
     h, w = lum_albedo.shape
+    if strength == 0:  # (the default) flat: nothing to read from the shading
+        return np.concatenate([np.zeros((h, w, 2), np.float32), np.ones((h, w, 1), np.float32)], -1)
     lum = np.maximum(lum_albedo, 1e-4).astype(np.float32)
     r = lum / _blur(lum, max(1.0, scale * 8 * w)) - 1.0
     r = _blur(r, max(0.5, w / 512.0))
@@ -385,10 +388,11 @@ def estimate(image, geo=None, normal_strength=None, with_fit=False, metals=None)
     white = np.minimum(share * lum[..., None], (1.0 - SUBTRACT_FLOOR) * (lin / tint).min(-1, keepdims=True))
     diffuse = (lin - white * tint) / (geo.intensity * shading[..., None]) / keep
     bad = clipped | (share[..., 0] > HIGHLIGHT_SHARE)  # what is left there is mostly the highlight's
-    # the texture under the highlight: the photo's brightness relative to its neighbourhood (the lobe is
-    # smooth at that scale), none where it clipped
-    rel = np.clip(lum / np.maximum(_blur(lum, max(1.0, w / 64.0)), 1e-6), 1.0 / DETAIL_RANGE, DETAIL_RANGE)
-    rel = np.where(clipped, 1.0, rel).astype(np.float32)
+    rel = None
+    if bad.any():  # the texture under the highlight: the photo's brightness over its neighbourhood's (the
+        # lobe is smooth at that scale), none where it clipped
+        rel = np.clip(lum / np.maximum(_blur(lum, max(1.0, w / 64.0)), 1e-6), 1.0 / DETAIL_RANGE, DETAIL_RANGE)
+        rel = np.where(clipped, 1.0, rel).astype(np.float32)
     diffuse = fill_from_surroundings(np.clip(diffuse, 0.0, None).astype(np.float32), bad, rel)
     diffuse = flatten_radial(diffuse, rho)
     diffuse = np.clip(np.nan_to_num(diffuse, nan=0.0, posinf=1.0), 0.0, 1.0).astype(np.float32)

@@ -7,6 +7,7 @@ import click
 from svbrdf_cli.batch import PHOTO_EXTENSIONS, collect_inputs, run_local
 from svbrdf_cli.cli.options import capture_options, finish
 from svbrdf_cli.gallery import write_gallery
+from svbrdf_cli.ray_engine import is_uri
 
 ENGINES = ("local", "ray")
 
@@ -51,10 +52,10 @@ def batch_cmd(folder, job, engine, address, workers):
             failures.append(msg)
 
         counts = run_ray(files, job, address=address, workers=workers, err=err)
-    elif "://" in job.output:
+    elif is_uri(job.output):
         raise click.UsageError(f"'{job.output}' is a URI: use --engine ray, or a local folder.")
     else:
         counts = run_local(files, job, failures)
-    if "://" not in job.output:
+    if not is_uri(job.output):
         write_gallery(job.output, failures)  # index.html: every set in the folder, this run's failures
     finish(counts, ignored, job.quiet)

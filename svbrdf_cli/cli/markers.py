@@ -1,11 +1,8 @@
 """``svbrdf markers``: the printable sheet for ``--crop markers``."""
 
-import os
-
 import click
 
-from svbrdf_cli.cli.options import force_opt
-from svbrdf_cli.errors import OutputExistsError
+from svbrdf_cli.cli.options import force_opt, refuse_existing
 from svbrdf_cli.rectify import SHEET_CELL_PX, SHEET_CELL_PX_RANGE, SHEET_CELLS
 
 
@@ -31,8 +28,7 @@ def markers_cmd(output, cell, force):
     from svbrdf_cli.imageio import write_image
     from svbrdf_cli.rectify import marker_sheet
 
-    if os.path.exists(output) and not force:
-        raise OutputExistsError(f"'{output}' exists; use --force to replace it.")
+    refuse_existing(output, force)
     sheet = marker_sheet(cell)
     write_image(output, sheet.astype(np.float32) / 255.0)
     click.echo(f"wrote {output} ({sheet.shape[1]}x{sheet.shape[0]}; print at any size, keep it flat)", err=True)

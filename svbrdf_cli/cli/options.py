@@ -4,12 +4,14 @@ summary. Every choice and limit is the library's."""
 
 import functools
 import logging
+import os
 import sys
 
 import click
 
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.batch import Job
+from svbrdf_cli.errors import OutputExistsError
 from svbrdf_cli.models import DEFAULT_MODEL
 from svbrdf_cli.cli.values import corners, exposure, light, numbers
 from svbrdf_cli.pipeline import MAX_SIZE, MIN_SIZE, UPSAMPLE_METHODS, Options
@@ -53,6 +55,12 @@ def force_opt(what):
         f = click.option("--overwrite", "force", is_flag=True, hidden=True)(f)
         return click.option("--force", "force", is_flag=True, help=f"Replace {what}.")(f)
     return deco
+
+
+def refuse_existing(path, force):
+    """A file output that exists is replaced only with --force (a file error, exit 1, otherwise)."""
+    if os.path.exists(path) and not force:
+        raise OutputExistsError(f"'{path}' exists; use --force to replace it.")
 
 
 def check_format(preset, fmt):

@@ -1,12 +1,9 @@
 """``svbrdf render``: relight a map set under a point light."""
 
-import os
-
 import click
 
-from svbrdf_cli.cli.options import force_opt, light_opt
+from svbrdf_cli.cli.options import force_opt, light_opt, refuse_existing
 from svbrdf_cli.cli.values import positive, stops
-from svbrdf_cli.errors import OutputExistsError
 
 
 @click.command("render")
@@ -36,8 +33,7 @@ def render_cmd(maps, output, light, intensity, exposure, force):
     from svbrdf_cli.mapset import read_map_set
     from svbrdf_cli.shading import render_maps
 
-    if os.path.exists(output) and not force:
-        raise OutputExistsError(f"'{output}' exists; use --force to replace it.")
+    refuse_existing(output, force)
     m = read_map_set(maps)
     kwargs = {"light": light or cv.FLASH_POSITION}
     kwargs["intensity"] = (intensity if intensity is not None else cv.LIGHT_INTENSITY) * 2.0 ** exposure

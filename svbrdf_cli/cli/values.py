@@ -33,12 +33,9 @@ def exposure(ctx, param, value):
     if value is None or value == "auto":
         return None
     try:
-        stops = float(value)
-    except ValueError:
-        stops = math.nan
-    if not abs(stops) <= MAX_EXPOSURE_STOPS:  # NaN and infinities too
-        raise click.BadParameter(f"expected 'auto' or stops within ±{MAX_EXPOSURE_STOPS:g}; got '{value}'.")
-    return stops
+        return stops(ctx, param, float(value))
+    except (ValueError, click.BadParameter):  # (BadParameter: NaN, infinite, out of range)
+        raise click.BadParameter(f"expected 'auto' or stops within ±{MAX_EXPOSURE_STOPS:g}; got '{value}'.") from None
 
 
 def stops(ctx, param, value):
