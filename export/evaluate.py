@@ -87,10 +87,10 @@ def predict(net, photo, mode="full", gt=None):
     return {k: v[0] for k, v in out.items()}
 
 
-def relight_rmse(pred_linear, gt_linear):
-    """Mean RMSE of encoded renderings under :data:`RELIGHT`."""
+def relight_rmse(pred_linear, gt_linear, lights=RELIGHT):
+    """Mean RMSE of encoded renderings under ``lights`` (default :data:`RELIGHT`)."""
     errs = []
-    for light in RELIGHT:
+    for light in lights:
         a = cv.image_to_encoded(render(*(pred_linear[k][None] for k in cv.MAP_NAMES), light=light))
         b = cv.image_to_encoded(render(*(gt_linear[k][None] for k in cv.MAP_NAMES), light=light))
         errs.append(float(((a - b) ** 2).mean().sqrt()))

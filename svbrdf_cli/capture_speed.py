@@ -49,7 +49,9 @@ def _one(photo, size, repeat, upsample, model, threads):
     from svbrdf_cli.models import load_model
 
     chain = load_model(model, threads=threads)
-    opts = pipeline.Options(size=size, upsample=upsample, force=True)
+    # refine=0: every variant here does the same work (decode, infer, upsample, write); --refine's own
+    # time is measured by export.refine_eval
+    opts = pipeline.Options(size=size, upsample=upsample, force=True, refine=0)
     runs = []
     with tempfile.TemporaryDirectory() as out:
         for _ in range(repeat + 1):  # the first run warms up onnxruntime

@@ -33,6 +33,7 @@ from svbrdf_cli import __version__
 from svbrdf_cli import conventions as cv
 from svbrdf_cli import ingest, rectify
 from svbrdf_cli.errors import SvbrdfError
+from svbrdf_cli.refine import DEFAULT_ITERATIONS as DEFAULT_REFINE
 
 log = logging.getLogger("svbrdf")
 
@@ -71,6 +72,7 @@ class Options:
     name: str | None = None                    # the material's name in engine file names (default: the photo's)
     tileable: bool = False                     # seamless maps (svbrdf_cli.tiling)
     ao: bool = True                            # ambient occlusion from the height (engine presets)
+    refine: int = DEFAULT_REFINE               # test-time refinement steps (svbrdf_cli.refine); 0: off
 
 
 # --------------------------------------------------------------------------
@@ -287,6 +289,29 @@ def prepare(path, opts):
     return Prepared(os.fspath(path), photo, c, small, float(gain), {"read": t1 - t0, "crop": t2 - t1})
 
 
+def refine_maps(prepared, chain, net_in, stored, iterations):
+    """``--refine``: the capture's geometry from the photo, then :func:`svbrdf_cli.refine.refine` at the
+    network's size, with a progress bar on a terminal (not with --quiet). Returns (maps, record entries)."""
+    import sys
+
+    from tqdm import tqdm
+
+    from svbrdf_cli import geometry, refine
+
+    p = prepared
+    found = getattr(getattr(chain, "used", chain), "found", None)
+    geo = geometry.for_capture(net_in, p.path, p.photo.linear.shape, p.crop.report, found)
+    bar = tqdm(total=iterations, unit="step", desc="refine", leave=False, file=sys.stderr, dynamic_ncols=True,
+               disable=not (sys.stderr.isatty() and log.isEnabledFor(logging.WARNING)))
+    try:
+        res = refine.refine(net_in, stored, geo, iterations, progress=lambda n: bar.update(1))
+    finally:
+        bar.close()
+    log.info("refine: photo loss %.5f -> %.5f in %.2f s", res.report["photo_loss_before"],
+             res.report["photo_loss_after"], res.report["seconds"])
+    return res.stored, {"geometry": geo.report(), "refine": res.report}
+
+
 def capture(prepared, chain, out_root, opts, model_name="fast"):
     """Infer and write the texture set of a :class:`Prepared` photo; returns (folder, record)."""
     from svbrdf_cli.imageio import write_image
@@ -304,6 +329,11 @@ def capture(prepared, chain, out_root, opts, model_name="fast"):
     t1 = time.perf_counter()
     side = output_size(opts, p.crop.image.shape[0])
     stored = {k: out[k] for k in cv.MAP_NAMES}
+    refined = None
+    if opts.refine:
+        stored, refined = refine_maps(p, chain, net_in, stored, opts.refine)
+        timings["refine"] = refined["refine"]["seconds"]
+    t_up = time.perf_counter()
     high = ingest.encode_for_network(resize(p.crop.image, side) * gain) if side != NETWORK_SIZE else net_in
     stored = upsample_maps(stored, net_in, high, opts.upsample)
     for k, v in stored.items():
@@ -317,7 +347,7 @@ def capture(prepared, chain, out_root, opts, model_name="fast"):
         maps = make_tileable(maps)
         stored = linear_to_stored(maps)
     t2 = time.perf_counter()
-    timings["upsample"] = t2 - t1
+    timings["upsample"] = t2 - t_up
     timings["network"] = t1 - t0
     conf = None
     if opts.confidence:
@@ -340,6 +370,8 @@ def capture(prepared, chain, out_root, opts, model_name="fast"):
         "upsampling": opts.upsample if side != NETWORK_SIZE else None,
         "preset": opts.preset, "bits": opts.bits, "format": opts.fmt, "tileable": opts.tileable,
     }
+    if refined is not None:
+        record.update(refined)
     if conf is not None:
         from svbrdf_cli import tta
 

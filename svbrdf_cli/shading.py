@@ -118,3 +118,108 @@ def render(normal, diffuse, roughness, specular, light=cv.FLASH_POSITION, camera
 def render_maps(maps, **kwargs):
     """:func:`render` for a dict of decoded maps (keys of ``MAP_NAMES``)."""
     return render(maps["normal"], maps["diffuse"], maps["roughness"], maps["specular"], **kwargs)
+
+
+# --------------------------------------------------------------------------
+# The same rendering with its gradient (for svbrdf_cli.refine)
+# --------------------------------------------------------------------------
+
+class Lighting:
+    """Per-pixel light and view directions for one capture geometry, computed once.
+
+    Args:
+        height, width: the image's pixels (the surface spans [-1, 1]^2 at any size).
+        light: light position (3,).
+        camera: camera position (3,); ``None``: at the light (a flash at the lens).
+        intensity: point-light intensity.
+    """
+
+    def __init__(self, height, width, light, camera=None, intensity=cv.LIGHT_INTENSITY):
+        p = cv.surface_positions(height, width)
+        to_light = np.asarray(light, np.float64) - p
+        dist2 = _dot(to_light, to_light)
+        self.l = (to_light / np.sqrt(dist2)).astype(np.float32)
+        self.v = self.l if camera is None else cv.normalize(np.asarray(camera, np.float64) - p).astype(np.float32)
+        self.h = cv.normalize(self.l + self.v).astype(np.float32)
+        self.fresnel_weight = ((1.0 - np.clip(_dot(self.v, self.h), 0.0, 1.0)) ** 5).astype(np.float32)
+        above = self.l[..., 2:] > 0
+        self.scale = (intensity * np.pi * above / dist2).astype(np.float32)  # I pi / d^2, 0 below the plane
+
+
+def tilt_to_normal(tilt):
+    """(..., 2) tilt (the normal's x/z and y/z) -> (..., 3) unit normals; any tilt is a valid normal."""
+    m = np.concatenate([tilt, np.ones_like(tilt[..., :1])], -1)
+    return m / np.sqrt((m * m).sum(-1, keepdims=True))
+
+
+def normal_to_tilt(normal, limit=10.0):
+    """Inverse of :func:`tilt_to_normal` (normals at grazing angles are held at ``limit``)."""
+    z = np.maximum(normal[..., 2:], 1e-3)
+    return np.clip(normal[..., :2] / z, -limit, limit).astype(np.float32)
+
+
+def render_with_gradient(tilt, diffuse, roughness, specular, lighting):
+    """:func:`render` of a tilt-parameterised map set, and the map of its vector-Jacobian product.
+
+    The model and clamps are :func:`render`'s; the gradient is analytic (checked against finite
+    differences and against torch's autograd of ``export/render/brdf.py`` in the tests). Where a
+    clamp is active (a cosine at 0 or 1, a denominator at its floor) the gradient is the clamped
+    function's, 0 through the clamped quantity.
+
+    Args:
+        tilt: (H, W, 2) normal tilt (see :func:`tilt_to_normal`).
+        diffuse: (H, W, 3) linear diffuse albedo.
+        roughness: (H, W, 1) roughness, in [MIN_ROUGHNESS, 1] (not clipped here).
+        specular: (H, W, 3) linear F0.
+        lighting: a :class:`Lighting` of the same size.
+
+    Returns:
+        (radiance (H, W, 3), backward), ``backward(grad_radiance)`` -> dict of gradients with keys
+        ``tilt``, ``diffuse``, ``roughness``, ``specular``, shaped as the arguments.
+    """
+    L = lighting
+    m = np.concatenate([tilt, np.ones_like(tilt[..., :1])], -1)
+    inv = 1.0 / np.sqrt((m * m).sum(-1, keepdims=True))
+    n = m * inv
+    nl, nv, nh = _dot(n, L.l), _dot(n, L.v), _dot(n, L.h)
+    nlc, nvc, nhc = np.clip(nl, 0.0, 1.0), np.clip(nv, 0.0, 1.0), np.clip(nh, 0.0, 1.0)
+    alpha = roughness * roughness
+    a2 = alpha * alpha
+    q = nhc * nhc * (a2 - 1.0) + 1.0
+    q_free = q > cv.EPS
+    qc = np.maximum(q, cv.EPS)
+    ndf = a2 / (np.pi * qc * qc)
+    k = alpha * 0.5
+    a_raw, b_raw = nlc * (1.0 - k) + k, nvc * (1.0 - k) + k
+    a_c, b_c = np.maximum(a_raw, cv.EPS), np.maximum(b_raw, cv.EPS)
+    vis = 1.0 / (a_c * b_c)
+    fw = L.fresnel_weight
+    fres = specular + (1.0 - specular) * fw
+    lobe = ndf * vis * 0.25
+    f = diffuse * (1.0 - specular) / np.pi + lobe * fres
+    radiance = L.scale * f * nlc
+
+    def backward(grad):
+        g_f = grad * L.scale * nlc
+        g = {"diffuse": g_f * (1.0 - specular) / np.pi,
+             "specular": g_f * (lobe * (1.0 - fw) - diffuse / np.pi)}
+        g_lobe = (g_f * fres).sum(-1, keepdims=True)
+        g_ndf, g_vis = g_lobe * vis * 0.25, g_lobe * ndf * 0.25
+        # D = a2 / (pi q^2), q = nh^2 (a2 - 1) + 1
+        d_ndf_a2 = 1.0 / (np.pi * qc * qc) - q_free * 2.0 * a2 * nhc * nhc / (np.pi * qc ** 3)
+        d_ndf_nh = q_free * ((nh > 0) & (nh < 1)) * (-4.0 * a2 * nhc * (a2 - 1.0) / (np.pi * qc ** 3))
+        # vis = 1 / (A B), A = nl (1 - k) + k, B = nv (1 - k) + k
+        da, db = (a_raw > cv.EPS) / a_c, (b_raw > cv.EPS) / b_c
+        d_vis_k = -vis * (da * (1.0 - nlc) + db * (1.0 - nvc))
+        in_l, in_v = (nl > 0) & (nl < 1), (nv > 0) & (nv < 1)
+        d_vis_nl = -vis * da * (1.0 - k) * in_l
+        d_vis_nv = -vis * db * (1.0 - k) * in_v
+        g_alpha = g_ndf * d_ndf_a2 * 2.0 * alpha + g_vis * d_vis_k * 0.5
+        g["roughness"] = g_alpha * 2.0 * roughness
+        g_nl = (grad * L.scale * f).sum(-1, keepdims=True) * in_l + g_vis * d_vis_nl
+        g_n = g_ndf * d_ndf_nh * L.h + g_nl * L.l + g_vis * d_vis_nv * L.v
+        g_m = (g_n - _dot(g_n, n) * n) * inv
+        g["tilt"] = g_m[..., :2]
+        return g
+
+    return radiance, backward

@@ -17,6 +17,7 @@ from svbrdf_cli.cli.values import corners, exposure, light, numbers
 from svbrdf_cli.pipeline import MAX_SIZE, MIN_SIZE, UPSAMPLE_METHODS, Options
 from svbrdf_cli.presets import FORMATS, PNG_BITS, PNG_ONLY_PRESETS, PRESETS
 from svbrdf_cli.rectify import CROP_MODES
+from svbrdf_cli.refine import DEFAULT_ITERATIONS, MAX_ITERATIONS
 
 
 def set_verbosity(quiet=False, verbose=0):
@@ -100,6 +101,10 @@ _CAPTURE_OPTIONS = [
     click.option("--no-ao", is_flag=True, help="Constant ambient occlusion (1) instead of one from the height."),
     click.option("--tileable", is_flag=True, help="Seamless maps: every map cross-faded with its half-shifted "
                                                   "copy near the borders, so the set tiles without a seam."),
+    click.option("--refine", type=click.IntRange(0, MAX_ITERATIONS), default=DEFAULT_ITERATIONS, show_default=True,
+                 is_flag=False, flag_value=DEFAULT_ITERATIONS, metavar="[N]",
+                 help="Steps fitting the maps to the photo under its own flash (about 2.5 s; 0: off, the "
+                      "model's maps as they are). See docs/capture.md."),
     click.option("--threads", type=click.IntRange(0, 256), default=0, help="onnxruntime threads (0: one per core)."),
     force_opt("existing texture sets (redo them)"),
     click.option("--name", default=None, help="The material's name in Unreal, Unity and Blender file names "
@@ -113,12 +118,12 @@ def capture_options(f):
     (:class:`svbrdf_cli.batch.Job`); verbosity is set before the command runs."""
     @functools.wraps(f)
     def command(*args, output, model, preset, crop, corners, size, exposure, white_balance, upsample, bits, fmt,
-                debug, confidence, no_preview, no_ao, tileable, threads, force, name, quiet, verbose, **kwargs):
+                debug, confidence, no_preview, no_ao, tileable, refine, threads, force, name, quiet, verbose, **kwargs):
         check_format(preset, fmt)
         opts = Options(preset=preset, crop=crop, corners=corners, size=size, exposure=exposure,
                        white_balance=white_balance, upsample=upsample, bits=int(bits), fmt=fmt, debug=debug,
                        confidence=confidence, preview=not no_preview, force=force, name=name, tileable=tileable,
-                       ao=not no_ao)
+                       ao=not no_ao, refine=refine)
         job = Job(output=output, opts=opts, model=model, threads=threads, quiet=set_verbosity(quiet, verbose))
         return f(*args, job=job, **kwargs)
 

@@ -141,3 +141,37 @@ def test_tileable_capture(tmp_path):
     assert code == 0, out
     assert json.loads((tmp_path / "o" / "wall" / "material.json").read_text())["tileable"] is True
     assert wrap_ratio(read_image(tmp_path / "o" / "wall" / "diffuse.png")) <= 1.5
+
+
+def test_refine_records_geometry_and_fit(tmp_path):
+    photo = make_photo(tmp_path / "plaster.png", h=320, w=480)
+    code, out = run("capture", photo, "-o", tmp_path / "r", "--refine", 12, "--size", 256)
+    assert code == 0, out
+    rec = json.loads((tmp_path / "r" / "plaster" / "material.json").read_text())
+    assert rec["refine"]["iterations"] == 12 and rec["refine"]["photo_loss_after"] <= rec["refine"]["photo_loss_before"]
+    geo = rec["geometry"]
+    # the auto crop of a 480 x 320 photo is the 320 px square at its centre: the lens is over the middle
+    assert geo["camera"][:2] == pytest.approx([0.0, 0.0], abs=0.02) and geo["sources"]["camera"] == "photo centre"
+    assert geo["focal_35mm"] is None and "refine" in rec["timings_s"]
+    for k in ("normal", "diffuse", "roughness", "specular"):
+        assert np.isfinite(read_image(tmp_path / "r" / "plaster" / f"{k}.png")).all()
+    # --refine alone, or nothing, takes the default number of steps; --refine 0 records nothing
+    from svbrdf_cli.refine import DEFAULT_ITERATIONS
+
+    for i, extra in enumerate((["--refine"], [])):
+        code, out = run("capture", photo, "-o", tmp_path / f"d{i}", "--size", 256, *extra)
+        assert code == 0, out
+        rec = json.loads((tmp_path / f"d{i}" / "plaster" / "material.json").read_text())
+        assert rec["refine"]["iterations"] == DEFAULT_ITERATIONS
+    code, out = run("capture", photo, "-o", tmp_path / "n", "--size", 256, "--refine", 0)
+    assert code == 0, out
+    assert "refine" not in json.loads((tmp_path / "n" / "plaster" / "material.json").read_text())
+
+
+def test_refine_rejects_counts_out_of_range(tmp_path):
+    from svbrdf_cli.refine import MAX_ITERATIONS
+
+    code, out = run("capture", SAMPLE, "-o", tmp_path / "x", "--refine", MAX_ITERATIONS + 1)
+    assert code == 2 and "--refine" in out and not (tmp_path / "x").exists()
+    code, out = run("capture", SAMPLE, "-o", tmp_path / "x", "--refine", -3)
+    assert code == 2 and "-3" in out and not (tmp_path / "x").exists()

@@ -1,0 +1,193 @@
+"""Does ``--refine`` relight better? Every method with and without test-time refinement, on lights it never saw.
+
+    python -m export.refine_eval                       # physical + every shipped tier, 150 iterations
+    python -m export.refine_eval --methods physical --iterations 150 --limit 5
+
+For each method (:mod:`export.methods`) and each setting (no refinement, ``--refine N``):
+
+* **card_blue_9lights**: maps from photo 00 (the most frontal), the capture's geometry estimated
+  from that photo alone (:func:`svbrdf_cli.geometry.estimate`, no EXIF in these files), rendered
+  under the 8 other photos' known lights with one intensity fitted on photo 00
+  (:meth:`export.benchmark.NineLights.relight_rmse`);
+* **Des19**: per-map RMSE by the reference scorer (``score_maps.py``, linear albedo), and the
+  re-rendering RMSE against the ground truth under :data:`HELD_OUT_LIGHTS` (9 lights, none at
+  the input's flash);
+* **time**: median of ``--repeat`` runs of the refinement alone at 256^2, and of the whole
+  ``svbrdf capture`` job (``--size 1024``) on the bundled sample.
+
+Prints a table and writes it as JSON with ``--json``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+import click
+import numpy as np
+import torch
+
+from export import methods as method_zoo
+from export.benchmark import NineLights, _chw
+from export.evaluate import load_des19, relight_rmse, score
+from export.files import command_errors, shared_root
+from svbrdf_cli import conventions as cv
+from svbrdf_cli import geometry, refine
+from svbrdf_cli.mapset import write_map_set
+
+#: Relighting lights for Des19: 9 on a ring around the flash (radius 1.2 at the camera's height, the
+#: first at 20 degrees), none where the input's flash was.
+HELD_OUT_LIGHTS = [(1.2 * math.cos(a), 1.2 * math.sin(a), cv.CAMERA_HEIGHT)
+                   for a in np.radians(20.0 + 40.0 * np.arange(9))]
+
+
+def held_out_relight(pred_linear, gt_linear):
+    """Mean RMSE of encoded renders under :data:`HELD_OUT_LIGHTS` (maps as (C, H, W) linear tensors)."""
+    return relight_rmse(pred_linear, gt_linear, HELD_OUT_LIGHTS)
+
+
+def refined(method, iterations, timings=None):
+    """``method`` followed by :func:`svbrdf_cli.refine.refine` under the photo's estimated geometry."""
+    if not iterations:
+        return method
+
+    def run(image):
+        stored = method(image)
+        geo = geometry.estimate(image, height=_flash_height(method, image))
+        t0 = time.perf_counter()
+        res = refine.refine(image, stored, geo, iterations)
+        if timings is not None:
+            timings.append(time.perf_counter() - t0)
+        return res.stored
+
+    return run
+
+
+def _flash_height(method, image):
+    from svbrdf_cli.physical import estimate
+
+    found = getattr(getattr(method, "chain", None), "found", None) or estimate(image)[1]
+    return found["flash_height"]
+
+
+def des19(method, samples, des19_dir, out):
+    rel = []
+    for name, photo, gt in samples:
+        stored = method(photo.permute(1, 2, 0).numpy())
+        lin = cv.decode_maps(_chw(stored), axis=0)
+        write_map_set(os.path.join(out, name), {k: v.permute(1, 2, 0).numpy() for k, v in lin.items()})
+        rel.append(held_out_relight(lin, gt))
+    maps, _ = score(des19_dir, out)
+    return {**maps, "relight_held_out": float(np.mean(rel))}
+
+
+def capture_seconds(model, refine_n, repeat, size=1024):
+    """Median wall time of ``svbrdf capture`` on the bundled sample (a fresh process each run)."""
+    sample = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "examples", "glazed_tiles.jpg")
+    times = []
+    for _ in range(repeat):
+        with tempfile.TemporaryDirectory() as out:
+            cmd = [sys.executable, "-m", "svbrdf_cli.cli.main", "capture", sample, "-o", out, "--model", model,
+                   "--size", str(size), "--quiet"] + (["--refine", str(refine_n)] if refine_n else [])
+            t0 = time.perf_counter()
+            subprocess.run(cmd, check=True, capture_output=True)
+            times.append(time.perf_counter() - t0)
+    return float(np.median(times))
+
+
+def run(names=None, iterations=refine.DEFAULT_ITERATIONS, limit=None, repeat=3, log=print):
+    root = shared_root() / "data"
+    des19_dir = str(root / "validation" / "des19")
+    samples = load_des19(des19_dir)[:limit] if limit else load_des19(des19_dir)
+    if limit:
+        sub = tempfile.mkdtemp(prefix="svbrdf-des19-")
+        for name, _, _ in samples:
+            os.symlink(os.path.join(des19_dir, name), os.path.join(sub, name))
+        des19_dir = sub
+    nine = NineLights(str(root / "real" / "card_blue_9lights"))
+    card_in = nine.network_input()
+    work = tempfile.mkdtemp(prefix="svbrdf-refine-")
+    rows = []
+    for m in method_zoo.available(threads=1):
+        if m.name in ("floor", "auto", "e2e") or (names and m.name not in names):
+            continue
+        for n in (0, iterations):
+            t = []
+            f = refined(m, n, t)
+            r = {"method": m.name, "refine": n, "card_relight": nine.relight_rmse(f(card_in))}
+            r.update(des19(f, samples, des19_dir, os.path.join(work, f"{m.name}-{n}")))
+            if n:
+                r["refine_s_256"] = float(np.median(t))
+            r["capture_s_1024"] = capture_seconds(m.name, n, repeat)
+            rows.append(r)
+            log("  ".join(f"{k}={v:.4f}" if isinstance(v, float) else f"{k}={v}" for k, v in r.items()))
+    return rows
+
+
+def figure(photos, path, iterations=refine.DEFAULT_ITERATIONS, tile=192, side_light=(1.4, 0.9, cv.CAMERA_HEIGHT)):
+    """Before/after figure: for each photo (as ``svbrdf capture --crop none`` feeds it), the physical
+    estimate's and the refined diffuse, normal and roughness, and both rendered under a side light."""
+    import cv2
+
+    from svbrdf_cli.imageio import read_image, write_image
+    from svbrdf_cli.pipeline import network_input, resize
+    from svbrdf_cli.shading import render_maps
+
+    method = method_zoo.Physical()
+    rows = []
+    for photo_path in photos:
+        lin = cv.srgb_to_linear(read_image(photo_path)[..., :3])
+        side = min(lin.shape[:2])
+        y0, x0 = (lin.shape[0] - side) // 2, (lin.shape[1] - side) // 2
+        image = network_input(resize(lin[y0:y0 + side, x0:x0 + side], 256))
+        before = method(image)
+        geo = geometry.estimate(image, height=method.chain.found["flash_height"])
+        after = refine.refine(image, before, geo, iterations).stored
+        cells = [("photo", image)]
+        for k in ("diffuse", "normal", "roughness"):
+            cells += [(f"{k}, physical", before[k]), (f"{k}, refined", after[k])]
+        for label, st in (("side light, physical", before), ("side light, refined", after)):
+            lin_maps = cv.decode_maps(st)
+            k = refine.fit_intensity(cv.image_to_linear(image), refine._params(st), geo)
+            cells.append((label, cv.image_to_encoded(render_maps(lin_maps, light=side_light, intensity=k))))
+        row = []
+        for title, img in cells:
+            img = np.repeat(img, 3, -1) if img.shape[-1] == 1 else img
+            t = cv2.resize(np.ascontiguousarray(img, np.float32), (tile, tile), interpolation=cv2.INTER_AREA)
+            t = np.ascontiguousarray((np.clip(t, 0, 1) * 255 + 0.5).astype(np.uint8))
+            t[-16:] = t[-16:] // 3
+            cv2.putText(t, title, (4, tile - 5), cv2.FONT_HERSHEY_SIMPLEX, 0.38, (255, 255, 255), 1, cv2.LINE_AA)
+            row.append(t)
+        rows.append(np.concatenate(row, 1))
+    write_image(path, np.concatenate(rows, 0).astype(np.float32) / 255)
+
+
+@click.command()
+@click.option("--methods", default=None, help="Comma-separated method names (default: physical and every shipped tier).")
+@click.option("--iterations", default=refine.DEFAULT_ITERATIONS, show_default=True)
+@click.option("--limit", type=int, default=None, help="Only the first N Des19 samples.")
+@click.option("--repeat", default=3, show_default=True, help="Runs per timing (median).")
+@click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None)
+@click.option("--figure", "figure_out", type=click.Path(dir_okay=False), default=None,
+              help="Only draw the before/after figure of --photo files into this PNG.")
+@click.option("--photo", "photos", multiple=True, type=click.Path(exists=True, dir_okay=False))
+def cli(methods, iterations, limit, repeat, json_out, figure_out, photos):
+    torch.set_num_threads(1)
+    if figure_out:
+        with command_errors():
+            figure(photos, figure_out, iterations)
+        return
+    with command_errors():
+        rows = run(methods.split(",") if methods else None, iterations, limit, repeat, log=click.echo)
+    if json_out:
+        with open(json_out, "w") as f:
+            json.dump(rows, f, indent=2)
+
+
+if __name__ == "__main__":
+    cli()

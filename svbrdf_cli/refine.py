@@ -1,0 +1,294 @@
+"""Test-time refinement: adjust the maps so that, rendered under the capture's own flash, they match the photo.
+
+``svbrdf capture --refine N`` runs :func:`refine` on the model's (or the physical estimate's)
+maps at the network's resolution, before upsampling. numpy only: the renderer and its analytic
+gradient are :func:`svbrdf_cli.shading.render_with_gradient`.
+
+**What is optimised.** Per pixel: the normal as a 2D tilt (x/z, y/z: every value is a valid
+normal), the diffuse albedo as its logarithm (relative steps, never negative), roughness and
+specular (F0) directly, projected back into range after each step. One global light intensity is
+fitted once at the start by least squares (an exposed photo has no absolute scale) and then held.
+
+**Against what.** The photo, compared gamma-encoded (as people and the relighting scores see it)
+through a robust (Cauchy) loss: pixels the photo clipped, and their rims, say only "at least this
+bright" and are left out, and a few badly explained pixels (a sparkle no smooth lobe makes, a
+speck of dust) barely pull the fit. With per-pixel freedom the
+diffuse alone could copy the photo exactly, so the priors decide how the residual is shared:
+
+* **closeness to the initial maps**, relative for diffuse (a pixel may change by a fraction of
+  itself), absolute for the rest: where the photo says nothing the prediction stands;
+* **smoothness of roughness and specular** (squared differences of neighbours): a highlight is
+  explained by a smooth lobe, not by painting its disc into the maps;
+* **a dielectric prior**: specular is pulled towards :data:`svbrdf_cli.conventions.DIELECTRIC_F0`;
+* **normals near the up direction** unless the photo needs them tilted.
+
+**Schedule.** Coarse to fine (:data:`LEVELS`): the changes are first found on a small image,
+where the smooth parts converge in few cheap steps, then upsampled and refined at the next
+level. Adam steps. The result is the iterate with the lowest objective; if it fits the photo
+worse than the starting maps, or anything is not finite, the starting maps are returned.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from svbrdf_cli import conventions as cv
+from svbrdf_cli import shading
+
+#: Iterations of ``--refine`` given without a number.
+DEFAULT_ITERATIONS = 150
+#: The most ``--refine`` accepts.
+MAX_ITERATIONS = 5000
+#: Resolutions of the coarse-to-fine schedule (fractions of the working size), and the share of
+#: the iterations each gets.
+LEVELS = ((0.25, 0.3), (0.5, 0.3), (1.0, 0.4))
+#: Encoded pixels at or above this were clipped by the camera.
+CLIPPED = 0.98
+#: Pixels this close (a fraction of the width) to a clipped one are left out of the photo term
+#: (the edge of a clipped blob is partly clipped too).
+CLIP_MARGIN = 0.008
+#: Width of the robust (Cauchy) loss on encoded residuals: residuals well under it count as
+#: squares, residuals well over it (a sparkle the model cannot make, a speck of dust) barely pull.
+ROBUST_WIDTH = 0.2
+#: Floor added to radiance before the 1/2.2 power (keeps its derivative finite at black).
+ENCODED_FLOOR = 1e-3
+
+
+@dataclasses.dataclass
+class Priors:
+    """Weights of the prior terms (each a mean over pixels, like the photo term).
+
+    Chosen on ``card_blue_9lights`` and 12 Des19 samples together (``docs/capture.md`` has the
+    measurements): weaker normal or diffuse closeness fits the photo better and relights worse.
+    """
+
+    diffuse: float = 0.2             # ((d - d0) / (d0 + 0.05))^2: relative
+    roughness: float = 0.5           # (r - r0)^2
+    specular: float = 2.0            # (s - s0)^2
+    normal: float = 1.0              # |tilt - tilt0|^2
+    up: float = 0.02                 # |tilt|^2
+    dielectric: float = 5.0          # (s - 0.04)^2
+    smooth_roughness: float = 2.0    # squared neighbour differences (at the full size)
+    smooth_specular: float = 2.0
+
+
+#: Adam step sizes per parameter (tilt, log diffuse, roughness, specular).
+STEP = {"tilt": 0.02, "diffuse": 0.03, "roughness": 0.02, "specular": 0.005}
+#: Ranges the parameters are projected into after each step.
+ROUGHNESS_RANGE = (0.03, 1.0)
+SPECULAR_RANGE = (0.0, 1.0)
+TILT_LIMIT = 3.0  # 72 degrees
+
+
+@dataclasses.dataclass
+class Result:
+    stored: dict            # refined maps, stored encoding (HWC, roughness one channel)
+    report: dict            # JSON-able: iterations, photo loss before/after, intensity, seconds
+
+
+def _resize(x, side):
+    import cv2
+
+    if x.shape[0] == side:
+        return x
+    interp = cv2.INTER_AREA if side < x.shape[0] else cv2.INTER_LINEAR
+    out = cv2.resize(np.ascontiguousarray(x, np.float32), (side, side), interpolation=interp)
+    return out.reshape(side, side, -1)
+
+
+def _robust(e):
+    """Cauchy penalty of residuals ``e`` and its derivative."""
+    c = ROBUST_WIDTH
+    t = 1.0 + (e / c) ** 2
+    return 0.5 * c * c * np.log(t), e / t
+
+
+def _encode(r):
+    """Radiance -> the space the photo is compared in (gamma encoded), and its derivative."""
+    y = (r + ENCODED_FLOOR) ** (1.0 / cv.IMAGE_GAMMA)
+    return y, y / (cv.IMAGE_GAMMA * (r + ENCODED_FLOOR))
+
+
+def _unclipped(photo_lin):
+    """(H, W, 1) weight: 0 at clipped pixels and within :data:`CLIP_MARGIN` of one, else 1."""
+    import cv2
+
+    clipped = (photo_lin >= cv.image_to_linear(np.float32(CLIPPED))).any(-1).astype(np.uint8)
+    r = max(1, int(round(CLIP_MARGIN * photo_lin.shape[0])))
+    if clipped.any():
+        clipped = cv2.dilate(clipped, np.ones((2 * r + 1, 2 * r + 1), np.uint8))
+    return (1.0 - clipped)[..., None].astype(np.float32)
+
+
+def _smoothness(x):
+    """Mean over pixels of squared neighbour differences, and its gradient."""
+    dx, dy = np.diff(x, axis=1), np.diff(x, axis=0)
+    n = x.shape[0] * x.shape[1]
+    val = float((dx * dx).sum() + (dy * dy).sum()) / n
+    g = np.zeros_like(x)
+    g[:, :-1] -= dx
+    g[:, 1:] += dx
+    g[:-1] -= dy
+    g[1:] += dy
+    return val, 2.0 * g / n
+
+
+def _maps(p):
+    return p["tilt"], np.exp(p["diffuse"]), p["roughness"], p["specular"]
+
+
+class _Problem:
+    """The objective at one resolution: the photo term plus the priors around the start ``init``."""
+
+    def __init__(self, photo_lin, init, geometry, intensity, priors, full_side):
+        side = photo_lin.shape[0]
+        self.weight = _unclipped(photo_lin)
+        self.count = max(float(self.weight.sum()) * 3.0, 1.0)
+        self.target = _encode(photo_lin)[0]
+        self.init = dict(init, diffuse_lin=np.exp(init["diffuse"]))
+        self.lighting = shading.Lighting(side, side, geometry.light, geometry.camera, intensity)
+        self.priors = priors
+        # a coarser level's neighbour differences span more of the surface: scale them to the full size's
+        self.smooth_scale = (side / full_side) ** 2
+
+    def photo_loss(self, p):
+        r, _ = shading.render_with_gradient(*_maps(p), self.lighting)
+        return float((self.weight * _robust(_encode(r)[0] - self.target)[0]).sum() / self.count)
+
+    def __call__(self, p):
+        """(objective, photo term, gradient dict like ``p``)."""
+        pr, init = self.priors, self.init
+        r, backward = shading.render_with_gradient(*_maps(p), self.lighting)
+        y, dy = _encode(r)
+        rho, drho = _robust(y - self.target)
+        data = float((self.weight * rho).sum() / self.count)
+        g = backward(self.weight * drho * dy / self.count)
+        d = np.exp(p["diffuse"])
+        g["diffuse"] = g["diffuse"] * d  # through d = exp(u)
+        n = float(r.shape[0] * r.shape[1])
+        total = data
+        d0 = init["diffuse_lin"]
+        rel = (d - d0) / (d0 + 0.05)
+        total += pr.diffuse * float((rel * rel).sum()) / (3 * n)
+        g["diffuse"] += pr.diffuse * 2.0 * rel / (d0 + 0.05) * d / (3 * n)
+        for key, w, ch in (("roughness", pr.roughness, 1), ("specular", pr.specular, 3), ("tilt", pr.normal, 2)):
+            dv = p[key] - init[key]
+            total += w * float((dv * dv).sum()) / (ch * n)
+            g[key] += w * 2.0 * dv / (ch * n)
+        total += pr.up * float((p["tilt"] ** 2).sum()) / (2 * n)
+        g["tilt"] += pr.up * 2.0 * p["tilt"] / (2 * n)
+        ds = p["specular"] - cv.DIELECTRIC_F0
+        total += pr.dielectric * float((ds * ds).sum()) / (3 * n)
+        g["specular"] += pr.dielectric * 2.0 * ds / (3 * n)
+        for key, w in (("roughness", pr.smooth_roughness), ("specular", pr.smooth_specular)):
+            val, gs = _smoothness(p[key])
+            total += w * val * self.smooth_scale
+            g[key] += w * gs * self.smooth_scale
+        return total, data, g
+
+
+def _params(stored):
+    """Stored maps -> optimisation parameters."""
+    lin = cv.decode_maps(stored)
+    return {"tilt": shading.normal_to_tilt(lin["normal"], TILT_LIMIT),
+            "diffuse": np.log(np.clip(lin["diffuse"], 1e-4, 1.0)).astype(np.float32),
+            "roughness": np.clip(lin["roughness"][..., :1], *ROUGHNESS_RANGE).astype(np.float32),
+            "specular": np.clip(lin["specular"], *SPECULAR_RANGE).astype(np.float32)}
+
+
+def _stored(p):
+    lin = {"normal": shading.tilt_to_normal(p["tilt"]), "diffuse": np.exp(p["diffuse"]),
+           "roughness": p["roughness"], "specular": p["specular"]}
+    out = cv.encode_maps(lin)
+    return {k: np.clip(v, 0.0, 1.0).astype(np.float32) for k, v in out.items()}
+
+
+def _project(p):
+    p["tilt"] = np.clip(p["tilt"], -TILT_LIMIT, TILT_LIMIT)
+    p["diffuse"] = np.clip(p["diffuse"], np.log(1e-4), 0.0)
+    p["roughness"] = np.clip(p["roughness"], *ROUGHNESS_RANGE)
+    p["specular"] = np.clip(p["specular"], *SPECULAR_RANGE)
+
+
+def fit_intensity(photo_lin, params, geometry):
+    """The light intensity that best reproduces the photo from ``params`` (least squares, unclipped pixels)."""
+    side = photo_lin.shape[0]
+    light = shading.Lighting(side, side, geometry.light, geometry.camera, 1.0)
+    r, _ = shading.render_with_gradient(*_maps(params), light)
+    ok = np.broadcast_to(_unclipped(photo_lin) > 0, r.shape)
+    num, den = float((r[ok] * photo_lin[ok]).sum()), float((r[ok] ** 2).sum())
+    return num / den if den > 0 else cv.FLASH_INTENSITY
+
+
+def refine(image, stored, geometry, iterations=DEFAULT_ITERATIONS, priors=None, progress=None):
+    """Refine ``stored`` maps against the encoded photo ``image`` lit as ``geometry`` says.
+
+    Args:
+        image: (S, S, 3) encoded photo in [0, 1] (the network input).
+        stored: dict of (S, S, C) stored-encoding maps (the model's output).
+        geometry: a :class:`svbrdf_cli.geometry.CaptureGeometry`.
+        iterations: Adam steps in all, over the levels of :data:`LEVELS`.
+        priors: :class:`Priors` (default weights when None).
+        progress: optional callable ``progress(steps_done)`` called after each step.
+
+    Returns:
+        :class:`Result`.
+    """
+    t0 = time.perf_counter()
+    priors = priors or Priors()
+    photo = cv.image_to_linear(np.asarray(image, np.float32)).astype(np.float32)
+    side = photo.shape[0]
+    start = _params({k: np.asarray(v, np.float32) for k, v in stored.items()})
+    intensity = fit_intensity(photo, start, geometry)
+    full = _Problem(photo, start, geometry, intensity, priors, side)
+    loss_before = full.photo_loss(start)
+    delta = None
+    best, best_total, best_data = start, None, loss_before
+    done = 0
+    plan = [(max(8, int(round(side * f))), int(round(iterations * share))) for f, share in LEVELS]
+    plan[-1] = (side, iterations - sum(n for _, n in plan[:-1]))
+    for s, steps in plan:
+        init = {k: _resize(v, s) for k, v in start.items()}
+        prob = full if s == side else _Problem(_resize(photo, s), init, geometry, intensity, priors, side)
+        delta = {k: np.zeros_like(v) for k, v in init.items()} if delta is None else \
+            {k: _resize(v, s) for k, v in delta.items()}
+        m1 = {k: np.zeros_like(v) for k, v in delta.items()}
+        m2 = {k: np.zeros_like(v) for k, v in delta.items()}
+        for i in range(1, steps + 1):
+            p = {k: init[k] + delta[k] for k in delta}
+            _project(p)
+            total, data, g = prob(p)
+            if not np.isfinite(total):
+                break
+            if s == side and (best_total is None or total < best_total):
+                best, best_total, best_data = p, total, data
+            for k in delta:
+                m1[k] = 0.9 * m1[k] + 0.1 * g[k]
+                m2[k] = 0.999 * m2[k] + 0.001 * g[k] * g[k]
+                step = STEP[k] * (m1[k] / (1 - 0.9 ** i)) / (np.sqrt(m2[k] / (1 - 0.999 ** i)) + 1e-12)
+                delta[k] = (delta[k] - step).astype(np.float32)
+            done += 1
+            if progress:
+                progress(done)
+        # the change, projected, is what the next level starts from
+        p = {k: init[k] + delta[k] for k in delta}
+        _project(p)
+        delta = {k: p[k] - init[k] for k in delta}
+    if delta is not None and plan[-1][1] > 0:
+        p = {k: start[k] + delta[k] for k in delta}
+        _project(p)
+        total, data, _ = full(p)
+        if np.isfinite(total) and (best_total is None or total < best_total):
+            best, best_data = p, data
+    out = _stored(best)
+    ok = all(np.isfinite(v).all() for v in out.values()) and best_data <= loss_before
+    if not ok:
+        out, best_data = _stored(start), loss_before
+    out["roughness"] = out["roughness"][..., :1]
+    report = {"iterations": int(done), "levels": [s for s, _ in plan], "intensity": round(float(intensity), 4),
+              "photo_loss_before": round(loss_before, 5), "photo_loss_after": round(float(best_data), 5),
+              "kept_start": not ok, "seconds": round(time.perf_counter() - t0, 3)}
+    return Result(out, report)

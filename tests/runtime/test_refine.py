@@ -1,0 +1,162 @@
+"""Test-time refinement (svbrdf_cli.refine), its renderer's gradient (svbrdf_cli.shading) and the
+capture geometry (svbrdf_cli.geometry)."""
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from svbrdf_cli import conventions as cv
+from svbrdf_cli import geometry, refine, shading
+
+
+def _random_maps(rng, size, dtype=np.float64):
+    return (rng.normal(0, 0.3, (size, size, 2)).astype(dtype), rng.uniform(0.05, 0.9, (size, size, 3)).astype(dtype),
+            rng.uniform(0.1, 0.9, (size, size, 1)).astype(dtype), rng.uniform(0.02, 0.6, (size, size, 3)).astype(dtype))
+
+
+@pytest.mark.parametrize("camera", [None, (0.1, 0.05, 2.2)])
+def test_render_with_gradient_matches_render_and_finite_differences(camera):
+    rng = np.random.default_rng(0)
+    maps = _random_maps(rng, 6)
+    light = shading.Lighting(6, 6, (0.3, -0.2, 2.0), camera)
+    radiance, backward = shading.render_with_gradient(*maps, light)
+    ref = shading.render(shading.tilt_to_normal(maps[0]), *maps[1:], light=(0.3, -0.2, 2.0), camera=camera)
+    assert np.allclose(radiance, ref, rtol=1e-5, atol=1e-6)
+    weights = rng.normal(size=radiance.shape)
+    grads = backward(weights)
+    names = ("tilt", "diffuse", "roughness", "specular")
+    for i, name in enumerate(names):
+        num = np.zeros_like(maps[i])
+        for idx in np.ndindex(maps[i].shape):
+            plus, minus = [m.copy() for m in maps], [m.copy() for m in maps]
+            plus[i][idx] += 1e-6
+            minus[i][idx] -= 1e-6
+            num[idx] = ((shading.render_with_gradient(*plus, light)[0] - shading.render_with_gradient(*minus, light)[0])
+                        * weights).sum() / 2e-6
+        assert np.allclose(grads[name], num, rtol=1e-4, atol=1e-6 * np.abs(num).max()), name
+
+
+def test_tilt_round_trip():
+    n = cv.normalize(np.array([[0.3, -0.2, 0.9], [0.0, 0.0, 1.0], [-0.5, 0.1, 0.4]]))
+    assert np.allclose(shading.tilt_to_normal(shading.normal_to_tilt(n)), n, atol=1e-6)
+
+
+def _photo(light, camera=(0.0, 0.0, 2.4), roughness=0.25, size=256, textured=True, seed=0, specular=0.04):
+    rng = np.random.default_rng(seed)
+    n = np.zeros((size, size, 3), np.float32)
+    n[..., 2] = 1
+    d = np.full((size, size, 3), 0.3, np.float32)
+    if textured:
+        noise = cv2.GaussianBlur(rng.uniform(0, 1, (size, size)).astype(np.float32), (0, 0), 3)
+        noise = (noise - noise.min()) / (noise.max() - noise.min())
+        d = d * (0.4 + 1.2 * noise[..., None])
+    r = np.full((size, size, 1), roughness, np.float32)
+    s = np.full((size, size, 3), specular, np.float32)
+    lin = shading.render(n, d, r, s, light=light, camera=camera, intensity=cv.FLASH_INTENSITY) * 0.5
+    return cv.image_to_encoded(lin).astype(np.float32), {"normal": n, "diffuse": d, "roughness": r, "specular": s}
+
+
+@pytest.mark.parametrize("offset", [(0.3, -0.2), (-0.4, 0.1), (0.0, 0.0), (0.5, 0.45)])
+@pytest.mark.parametrize("roughness", [0.15, 0.3])
+def test_highlight_centre_of_an_off_centre_flash_within_2_percent(offset, roughness):
+    photo, _ = _photo((offset[0], offset[1], 2.4), roughness=roughness)
+    hx, hy = geometry.highlight_centre(photo)
+    # equal heights: the mirror point is half-way between the camera's foot (0, 0) and the flash's
+    width = 2 * cv.SURFACE_HALF_SIZE
+    assert abs(hx - offset[0] / 2) <= 0.02 * width and abs(hy - offset[1] / 2) <= 0.02 * width
+
+
+def test_geometry_recovers_the_flash_from_the_highlight_and_the_photo_centre():
+    # a 600 x 400 photo whose 400 px crop sits 100 px right of the photo's centre: camera foot at x = -0.5
+    photo, _ = _photo((-0.5 + 0.3, 0.2, 2.4), camera=(-0.5, 0.0, 2.4))
+    geo = geometry.estimate(photo, height=2.4, photo_size=(600, 400), box=(200, 0, 400, 400))
+    assert geo.camera[:2] == pytest.approx((-0.5, 0.0), abs=1e-6)
+    assert geo.light[0] == pytest.approx(-0.2, abs=0.04) and geo.light[1] == pytest.approx(0.2, abs=0.04)
+    assert geo.sources == {"height": "falloff fit", "camera": "photo centre", "light": "highlight"}
+    # a crop with no box (rectified): the flash is taken to be at the lens, over the highlight
+    geo = geometry.estimate(photo)
+    assert geo.camera == geo.light and geo.light[2] == pytest.approx(cv.CAMERA_HEIGHT)
+
+
+def test_flash_offset_is_capped():
+    photo, _ = _photo((0.5, 0.5, 2.4), camera=(0.0, 0.0, 2.4))
+    geo = geometry.estimate(photo, height=2.4, photo_size=(400, 400), box=(-400, 0, 400, 400))  # camera far left
+    off = math.hypot(geo.light[0] - geo.camera[0], geo.light[1] - geo.camera[1])
+    assert off == pytest.approx(geometry.MAX_FLASH_OFFSET * 2.4, rel=1e-6)
+    assert "capped" in geo.sources["light"]
+
+
+def test_exif_focal_length_sets_the_height(tmp_path):
+    import OpenImageIO as oiio
+
+    path = str(tmp_path / "phone.jpg")
+    spec = oiio.ImageSpec(64, 48, 3, "uint8")
+    spec.attribute("Exif:FocalLengthIn35mmFilm", 26)
+    out = oiio.ImageOutput.create(path)
+    out.open(path, spec)
+    out.write_image(np.zeros((48, 64, 3), np.uint8))
+    out.close()
+    assert geometry.focal_35mm(path) == 26.0
+    assert geometry.focal_35mm(tmp_path / "missing.jpg") is None
+    # 26 mm on a 4000 x 3000 photo: f = 26 * 5000 / 43.27 px; a 2000 px crop is 1000 px either side
+    z = geometry.crop_height(26.0, (4000, 3000), 2000)
+    assert z == pytest.approx(26.0 * 5000 / math.hypot(36, 24) / 1000, rel=1e-9)
+    photo, _ = _photo((0.0, 0.0, 2.4))
+    geo = geometry.estimate(photo, height=1.0, focal=26.0, photo_size=(4000, 3000), box=(1000, 500, 2000, 2000))
+    assert geo.light[2] == pytest.approx(z) and geo.sources["height"] == "exif"
+
+
+def _stored(maps):
+    out = cv.encode_maps(maps)
+    return {k: np.asarray(v, np.float32) for k, v in out.items()}
+
+
+def test_refinement_fits_the_photo_better_and_moves_towards_the_truth():
+    light = (0.2, -0.1, 2.4)
+    photo, truth = _photo(light, camera=light, roughness=0.3, seed=3)
+    start = dict(truth, roughness=np.full_like(truth["roughness"], 0.6), diffuse=truth["diffuse"] * 0.7 + 0.05)
+    geo = geometry.CaptureGeometry(camera=light, light=light, highlight=light[:2])
+    res = refine.refine(photo, _stored(start), geo, 60)
+    assert res.report["photo_loss_after"] < 0.8 * res.report["photo_loss_before"]
+    assert not res.report["kept_start"] and res.report["iterations"] == 60
+    out = cv.decode_maps(res.stored)
+    def err(m):  # the albedo's texture, whatever its level (the intensity is fitted, the level is free)
+        d, t = m["diffuse"], truth["diffuse"]
+        return float(np.sqrt(((d / d.mean() - t / t.mean()) ** 2).mean()))
+
+    assert err(out) < 0.95 * err(start)
+    assert abs(float(out["roughness"].mean()) - 0.3) < abs(0.6 - 0.3)
+
+
+@pytest.mark.parametrize("case", ["extreme maps", "noise photo", "black photo", "clipped photo"])
+def test_refinement_never_returns_nan_or_a_worse_fit(case):
+    rng = np.random.default_rng(1)
+    size = 64
+    photo, truth = _photo((0.0, 0.0, 2.4), size=size)
+    maps = dict(truth)
+    if case == "extreme maps":
+        maps = {"normal": cv.normalize(np.concatenate([rng.normal(0, 3, (size, size, 2)), np.full((size, size, 1), 0.01)],
+                                                      -1)),
+                "diffuse": rng.uniform(0, 1, (size, size, 3)), "roughness": np.zeros((size, size, 1)),
+                "specular": np.ones((size, size, 3))}
+    elif case == "noise photo":
+        photo = rng.uniform(0, 1, photo.shape).astype(np.float32)
+    elif case == "black photo":
+        photo = np.zeros_like(photo)
+    else:
+        photo = np.minimum(photo * 4.0, 1.0)
+    geo = geometry.CaptureGeometry(camera=(0, 0, 2.4), light=(0, 0, 2.4), highlight=(0, 0))
+    res = refine.refine(photo, _stored(maps), geo, 30)
+    assert all(np.isfinite(v).all() and v.min() >= 0 and v.max() <= 1 for v in res.stored.values())
+    assert res.stored["roughness"].shape == (size, size, 1)
+    assert res.report["photo_loss_after"] <= res.report["photo_loss_before"]
+
+
+def test_progress_is_called_once_per_step():
+    photo, truth = _photo((0.0, 0.0, 2.4), size=32)
+    steps = []
+    geo = geometry.CaptureGeometry(camera=(0, 0, 2.4), light=(0, 0, 2.4), highlight=(0, 0))
+    res = refine.refine(photo, _stored(truth), geo, 10, progress=steps.append)
+    assert steps == list(range(1, 11)) and res.report["iterations"] == 10
