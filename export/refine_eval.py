@@ -93,14 +93,14 @@ def capture_seconds(model, refine_n, repeat, size=1024):
     for _ in range(repeat):
         with tempfile.TemporaryDirectory() as out:
             cmd = [sys.executable, "-m", "svbrdf_cli.cli.main", "capture", sample, "-o", out, "--model", model,
-                   "--size", str(size), "--quiet"] + (["--refine", str(refine_n)] if refine_n else [])
+                   "--size", str(size), "--quiet", "--refine", str(refine_n)]
             t0 = time.perf_counter()
             subprocess.run(cmd, check=True, capture_output=True)
             times.append(time.perf_counter() - t0)
     return float(np.median(times))
 
 
-def run(names=None, iterations=refine.DEFAULT_ITERATIONS, limit=None, repeat=3, log=print):
+def run(names=None, iterations=refine.DEFAULT_ITERATIONS, limit=None, repeat=3, log=print, extra=None):
     root = shared_root() / "data"
     des19_dir = str(root / "validation" / "des19")
     samples = load_des19(des19_dir)[:limit] if limit else load_des19(des19_dir)
@@ -113,9 +113,11 @@ def run(names=None, iterations=refine.DEFAULT_ITERATIONS, limit=None, repeat=3, 
     card_in = nine.network_input()
     work = tempfile.mkdtemp(prefix="svbrdf-refine-")
     rows = []
-    for m in method_zoo.available(threads=1):
-        if m.name in ("floor", "auto", "e2e") or (names and m.name not in names):
-            continue
+    # (method, what `svbrdf capture --model` takes for it)
+    zoo = [(m, m.name) for m in method_zoo.available(threads=1)
+           if m.name not in ("floor", "auto", "e2e") and (not names or m.name in names)]
+    zoo += [(method_zoo.Network(os.path.basename(os.path.normpath(d)), d, threads=1), d) for d in extra or ()]
+    for m, model_arg in zoo:
         for n in (0, iterations):
             t = []
             f = refined(m, n, t)
@@ -123,7 +125,8 @@ def run(names=None, iterations=refine.DEFAULT_ITERATIONS, limit=None, repeat=3, 
             r.update(des19(f, samples, des19_dir, os.path.join(work, f"{m.name}-{n}")))
             if n:
                 r["refine_s_256"] = float(np.median(t))
-            r["capture_s_1024"] = capture_seconds(m.name, n, repeat)
+            if repeat:
+                r["capture_s_1024"] = capture_seconds(model_arg, n, repeat)
             rows.append(r)
             log("  ".join(f"{k}={v:.4f}" if isinstance(v, float) else f"{k}={v}" for k, v in r.items()))
     return rows
@@ -171,19 +174,21 @@ def figure(photos, path, iterations=refine.DEFAULT_ITERATIONS, tile=192, side_li
 @click.option("--methods", default=None, help="Comma-separated method names (default: physical and every shipped tier).")
 @click.option("--iterations", default=refine.DEFAULT_ITERATIONS, show_default=True)
 @click.option("--limit", type=int, default=None, help="Only the first N Des19 samples.")
-@click.option("--repeat", default=3, show_default=True, help="Runs per timing (median).")
+@click.option("--repeat", default=3, show_default=True, help="Runs per timing (median); 0: no capture timing.")
+@click.option("--model-dir", "extra", multiple=True, type=click.Path(exists=True, file_okay=False),
+              help="Also an exported model folder (e.g. a training run's export), named after the folder.")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None)
 @click.option("--figure", "figure_out", type=click.Path(dir_okay=False), default=None,
               help="Only draw the before/after figure of --photo files into this PNG.")
 @click.option("--photo", "photos", multiple=True, type=click.Path(exists=True, dir_okay=False))
-def cli(methods, iterations, limit, repeat, json_out, figure_out, photos):
+def cli(methods, iterations, limit, repeat, json_out, figure_out, photos, extra):
     torch.set_num_threads(1)
     if figure_out:
         with command_errors():
             figure(photos, figure_out, iterations)
         return
     with command_errors():
-        rows = run(methods.split(",") if methods else None, iterations, limit, repeat, log=click.echo)
+        rows = run(methods.split(",") if methods else None, iterations, limit, repeat, log=click.echo, extra=extra)
     if json_out:
         with open(json_out, "w") as f:
             json.dump(rows, f, indent=2)

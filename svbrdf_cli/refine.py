@@ -53,6 +53,8 @@ CLIP_MARGIN = 0.008
 #: Width of the robust (Cauchy) loss on encoded residuals: residuals well under it count as
 #: squares, residuals well over it (a sparkle the model cannot make, a speck of dust) barely pull.
 ROBUST_WIDTH = 0.2
+#: The scale of a "broad" tilt (:attr:`Priors.up_broad`), a fraction of the width.
+BROAD_SIGMA = 1.0 / 16.0
 #: Floor added to radiance before the 1/2.2 power (keeps its derivative finite at black).
 ENCODED_FLOOR = 1e-3
 
@@ -70,6 +72,7 @@ class Priors:
     specular: float = 2.0            # (s - s0)^2
     normal: float = 1.0              # |tilt - tilt0|^2
     up: float = 0.02                 # |tilt|^2
+    up_broad: float = 10.0           # |tilt blurred over BROAD_SIGMA|^2: no tilt of whole regions
     dielectric: float = 5.0          # (s - 0.04)^2
     smooth_roughness: float = 2.0    # squared neighbour differences (at the full size)
     smooth_specular: float = 2.0
@@ -136,6 +139,13 @@ def _smoothness(x):
     return val, 2.0 * g / n
 
 
+def _broad(x):
+    import cv2
+
+    s = BROAD_SIGMA * x.shape[0]
+    return cv2.GaussianBlur(np.ascontiguousarray(x, np.float32), (0, 0), s, borderType=cv2.BORDER_REFLECT).reshape(x.shape)
+
+
 def _maps(p):
     return p["tilt"], np.exp(p["diffuse"]), p["roughness"], p["specular"]
 
@@ -180,6 +190,10 @@ class _Problem:
             g[key] += w * 2.0 * dv / (ch * n)
         total += pr.up * float((p["tilt"] ** 2).sum()) / (2 * n)
         g["tilt"] += pr.up * 2.0 * p["tilt"] / (2 * n)
+        if pr.up_broad:  # the blur is symmetric: its own adjoint
+            b = _broad(p["tilt"])
+            total += pr.up_broad * float((b * b).sum()) / (2 * n)
+            g["tilt"] += pr.up_broad * 2.0 * _broad(b) / (2 * n)
         ds = p["specular"] - cv.DIELECTRIC_F0
         total += pr.dielectric * float((ds * ds).sum()) / (3 * n)
         g["specular"] += pr.dielectric * 2.0 * ds / (3 * n)
