@@ -423,6 +423,8 @@ class PhysicalModel:
 
     tier = "physical"
     stages = ()
+    #: Runs at any image size (the capture runs it again at the output size instead of upsampling).
+    any_size = True
 
     def __init__(self, geometry=None):
         self.geometry = geometry

@@ -9,7 +9,10 @@ auxiliary renderings).
 
 **Resolution.** The networks run at :data:`NETWORK_SIZE` (their export and
 validation resolution; they were trained on 128 px crops, see each model's
-``provenance.json``). Larger outputs are made by *guided upsampling*
+``provenance.json``); a model that runs at any size (``any_size``: the physical
+estimate) runs again at the output size, and ``--refine``'s change, found at
+:data:`NETWORK_SIZE`, is carried over to it (:func:`svbrdf_cli.refine.transfer`).
+A network's larger outputs are made by *guided upsampling*
 (:func:`guided_upsample`): the normal and diffuse maps are regressed locally
 on the photo's brightness at network resolution, and the full-resolution
 photo's fine detail (grain, scratches, pores) is added to their bicubic
@@ -331,11 +334,25 @@ def capture(prepared, chain, out_root, opts, model_name="fast"):
     stored = {k: out[k] for k in cv.MAP_NAMES}
     refined = None
     if opts.refine:
-        stored, refined = refine_maps(p, chain, net_in, stored, opts.refine)
+        low_refined, refined = refine_maps(p, chain, net_in, stored, opts.refine)
         timings["refine"] = refined["refine"]["seconds"]
     t_up = time.perf_counter()
     high = ingest.encode_for_network(resize(p.crop.image, side) * gain) if side != NETWORK_SIZE else net_in
-    stored = upsample_maps(stored, net_in, high, opts.upsample)
+    upsampling = opts.upsample if side != NETWORK_SIZE else None
+    if side != NETWORK_SIZE and getattr(chain.used, "any_size", False):
+        # a model that runs at any size (the physical estimate) runs again at the output size: the
+        # photo's own detail, not an upsampled map (docs/capture.md, "Resolution")
+        full = chain.used(high)
+        timings["network_full_size"] = time.perf_counter() - t_up
+        start = {k: full[k] for k in cv.MAP_NAMES}
+        upsampling = "model at output size"
+    else:
+        start = upsample_maps(stored, net_in, high, opts.upsample)
+    if refined is not None:
+        from svbrdf_cli.refine import transfer
+
+        start = transfer(stored, low_refined, start)
+    stored = start
     for k, v in stored.items():
         if not np.isfinite(v).all():
             raise SvbrdfError(f"The model produced non-finite values for '{p.path}' ({k}); please report this photo.")
@@ -367,7 +384,7 @@ def capture(prepared, chain, out_root, opts, model_name="fast"):
         "exposure": {"mode": "auto" if opts.exposure is None else "manual", "stops": round(p.gain_ev, 3)},
         "white_balance": list(opts.white_balance) if opts.white_balance else None,
         "network_size": NETWORK_SIZE, "size": side,
-        "upsampling": opts.upsample if side != NETWORK_SIZE else None,
+        "upsampling": upsampling,
         "preset": opts.preset, "bits": opts.bits, "format": opts.fmt, "tileable": opts.tileable,
     }
     if refined is not None:

@@ -19,7 +19,9 @@ diffuse alone could copy the photo exactly, so the priors decide how the residua
   itself), absolute for the rest: where the photo says nothing the prediction stands;
 * **smoothness of roughness and specular** (squared differences of neighbours): a highlight is
   explained by a smooth lobe, not by painting its disc into the maps;
-* **a dielectric prior**: specular is pulled towards :data:`svbrdf_cli.conventions.DIELECTRIC_F0`;
+* **a dielectric prior**: specular is pulled towards :data:`svbrdf_cli.conventions.DIELECTRIC_F0`,
+  and its change is grey plus at most the diffuse's own colour (:func:`_spec_change`: a metal looks
+  its colour; no other tint is added to explain a white highlight over a coloured diffuse);
 * **normals near the up direction** unless the photo needs them tilted.
 
 **Schedule.** Coarse to fine (:data:`LEVELS`): the changes are first found on a small image,
@@ -204,6 +206,27 @@ class _Problem:
         return total, data, g
 
 
+def _tint(diffuse_log):
+    """(H, W, 3) colour of the diffuse with unit channel mean: the one tint F0 may take on (a metal's)."""
+    d = np.exp(diffuse_log)
+    return (d / np.maximum(d.mean(-1, keepdims=True), 1e-4)).astype(np.float32)
+
+
+def _spec_change(change, tint):
+    """Project a change of F0 onto ``a * grey + b * tint`` with ``b >= 0`` (per pixel, least squares): F0 may
+    rise or fall, and take on the diffuse's own colour (a metal's look), but no other colour: not the
+    blue that would whiten a highlight over brown wood, nor the photo's texture."""
+    one = np.ones_like(tint)
+    g11, g12, g22 = 3.0, tint.sum(-1, keepdims=True), (tint * tint).sum(-1, keepdims=True)
+    r1, r2 = change.sum(-1, keepdims=True), (change * tint).sum(-1, keepdims=True)
+    det = g11 * g22 - g12 * g12
+    ok = det > 1e-6  # a grey diffuse has no tint of its own
+    b = np.where(ok, (g11 * r2 - g12 * r1) / np.where(ok, det, 1.0), 0.0)
+    b = np.maximum(b, 0.0)
+    a = (r1 - b * g12) / g11
+    return (a * one + b * tint).astype(np.float32)
+
+
 def _params(stored):
     """Stored maps -> optimisation parameters."""
     lin = cv.decode_maps(stored)
@@ -269,6 +292,7 @@ def refine(image, stored, geometry, iterations=DEFAULT_ITERATIONS, priors=None, 
         prob = full if s == side else _Problem(_resize(photo, s), init, geometry, intensity, priors, side)
         delta = {k: np.zeros_like(v) for k, v in init.items()} if delta is None else \
             {k: _resize(v, s) for k, v in delta.items()}
+        tint = _tint(init["diffuse"])
         m1 = {k: np.zeros_like(v) for k, v in delta.items()}
         m2 = {k: np.zeros_like(v) for k, v in delta.items()}
         for i in range(1, steps + 1):
@@ -284,6 +308,7 @@ def refine(image, stored, geometry, iterations=DEFAULT_ITERATIONS, priors=None, 
                 m2[k] = 0.999 * m2[k] + 0.001 * g[k] * g[k]
                 step = STEP[k] * (m1[k] / (1 - 0.9 ** i)) / (np.sqrt(m2[k] / (1 - 0.999 ** i)) + 1e-12)
                 delta[k] = (delta[k] - step).astype(np.float32)
+            delta["specular"] = _spec_change(delta["specular"], tint)
             done += 1
             if progress:
                 progress(done)
@@ -306,3 +331,25 @@ def refine(image, stored, geometry, iterations=DEFAULT_ITERATIONS, priors=None, 
               "photo_loss_before": round(loss_before, 5), "photo_loss_after": round(float(best_data), 5),
               "kept_start": not ok, "seconds": round(time.perf_counter() - t0, 3)}
     return Result(out, report)
+
+
+def transfer(start, refined, target):
+    """The refinement's change, ``refined`` less ``start`` in the optimisation's parameters, added to
+    ``target``: the same photo's maps at another size (the model's maps upsampled, or the physical
+    estimate computed at the output size), so the change reaches the output without blurring it.
+
+    Args:
+        start, refined: stored-encoding maps at the working size (before and after :func:`refine`).
+        target: stored-encoding maps at the output size.
+
+    Returns:
+        stored-encoding maps at the output size (roughness one channel).
+    """
+    a, b, t = (_params({k: np.asarray(v, np.float32) for k, v in m.items()}) for m in (start, refined, target))
+    side = t["tilt"].shape[0]
+    p = {k: (t[k] + _resize(b[k] - a[k], side)).astype(np.float32) for k in t}
+    _project(p)
+    out = _stored(p)
+    out["roughness"] = out["roughness"][..., :1]
+    return out
+

@@ -169,3 +169,32 @@ def test_progress_is_called_once_per_step():
     geo = geometry.CaptureGeometry(camera=(0, 0, 2.4), light=(0, 0, 2.4), highlight=(0, 0))
     res = refine.refine(photo, _stored(truth), geo, 10, progress=steps.append)
     assert steps == list(range(1, 11)) and res.report["iterations"] == 10
+
+
+def test_transfer_carries_the_change_to_another_size():
+    photo, truth = _photo((0.0, 0.0, 2.4), size=64)
+    start = _stored(truth)
+    refined = dict(start, roughness=np.clip(start["roughness"] + 0.1, 0, 1),
+                   diffuse=cv.albedo_to_stored(cv.albedo_to_linear(start["diffuse"]) * 0.5).astype(np.float32))
+    big = {k: cv2.resize(v, (128, 128), interpolation=cv2.INTER_LINEAR).reshape(128, 128, -1) for k, v in start.items()}
+    same = refine.transfer(start, start, big)
+    for k in big:
+        assert np.allclose(same[k], big[k], atol=2e-3), k
+    moved = refine.transfer(start, refined, big)
+    assert moved["roughness"].shape == (128, 128, 1)
+    assert np.allclose(moved["roughness"], big["roughness"] + 0.1, atol=2e-3)
+    ratio = cv.albedo_to_linear(moved["diffuse"]) / np.maximum(cv.albedo_to_linear(big["diffuse"]), 1e-6)
+    assert np.allclose(np.median(ratio), 0.5, atol=0.01)
+
+
+def test_specular_changes_only_grey_or_in_the_diffuse_colour():
+    brown = np.array([[[1.5, 1.0, 0.5]]], np.float32)  # a diffuse's tint (unit channel mean)
+    gold = np.array([[[0.3, 0.2, 0.1]]], np.float32)   # a change along that tint: kept
+    assert np.allclose(refine._spec_change(gold, brown), gold, atol=1e-6)
+    grey = np.full((1, 1, 3), 0.05, np.float32)        # a grey change: kept
+    assert np.allclose(refine._spec_change(grey, brown), grey, atol=1e-6)
+    blue = np.array([[[-0.1, 0.0, 0.1]]], np.float32)   # against the tint: no blue F0 on brown wood
+    out = refine._spec_change(blue, brown)
+    assert np.ptp(out) < 1e-6 and abs(float(out.mean())) < 1e-6
+    flat = refine._spec_change(blue, np.ones((1, 1, 3), np.float32))  # grey diffuse: grey changes only
+    assert np.ptp(flat) < 1e-6

@@ -175,3 +175,15 @@ def test_refine_rejects_counts_out_of_range(tmp_path):
     assert code == 2 and "--refine" in out and not (tmp_path / "x").exists()
     code, out = run("capture", SAMPLE, "-o", tmp_path / "x", "--refine", -3)
     assert code == 2 and "-3" in out and not (tmp_path / "x").exists()
+
+
+def test_the_physical_estimate_runs_at_the_output_size(tmp_path):
+    photo = make_photo(tmp_path / "plaster.png", h=600, w=800)
+    code, out = run("capture", photo, "-o", tmp_path / "p", "--size", 512, "--refine", 0, "--model", "physical")
+    assert code == 0, out
+    rec = json.loads((tmp_path / "p" / "plaster" / "material.json").read_text())
+    assert rec["upsampling"] == "model at output size" and "network_full_size" in rec["timings_s"]
+    code, out = run("capture", photo, "-o", tmp_path / "f", "--size", 512, "--refine", 0, "--model", "fast")
+    assert code == 0, out
+    assert json.loads((tmp_path / "f" / "plaster" / "material.json").read_text())["upsampling"] == "guided"
+
