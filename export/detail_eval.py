@@ -47,16 +47,16 @@ def map_signal(name, stored):
     return stored[..., 0]
 
 
-def ratios(photo_path, size, model="physical", upsample="guided", refine=0):
-    """{map: detail ratio} of one capture at ``size`` (None: the crop's own size, at most 1024)."""
+def ratios(photo_path, size, chain, model="physical", upsample="guided", refine=0):
+    """{map: detail ratio} of one capture at ``size`` (None: the crop's own size, at most 1024) by
+    ``chain`` (:func:`svbrdf_cli.models.load_model` of ``model``)."""
     from svbrdf_cli import ingest, pipeline
     from svbrdf_cli.imageio import read_image
-    from svbrdf_cli.models import load_model
 
     opts = pipeline.Options(size=size, upsample=upsample, refine=refine, preview=False, force=True)
     prepared = pipeline.prepare(photo_path, opts)
     with tempfile.TemporaryDirectory() as out:
-        folder, record = pipeline.capture(prepared, load_model(model, threads=1), out, opts, model_name=model)
+        folder, record = pipeline.capture(prepared, chain, out, opts, model_name=model)
         side = record["size"]
         photo = ingest.encode_for_network(pipeline.resize(prepared.crop.image, side) * np.float32(2.0 ** prepared.gain_ev))
         ref = high_frequency(photo @ np.asarray(cv.LUMA, np.float32))
@@ -77,15 +77,18 @@ def real_photos(count=PHOTOS):
 
 
 def run(model="physical", upsample="guided", refine=0, log=print):
+    from svbrdf_cli.models import load_model
+
+    chain = load_model(model, threads=1)  # one session for every photo
     rows = []
     photos = real_photos()
     for f in photos:
-        r = ratios(f, None, model, upsample, refine)
+        r = ratios(f, None, chain, model, upsample, refine)
         rows.append({"photo": os.path.relpath(f, shared_root() / "data"), **r})
         log(f"{rows[-1]['photo']:45s} {r['size']:5d} " + " ".join(f"{k}={r[k]:.3f}" for k in cv.MAP_NAMES))
     dng = shared_root() / "data" / "raw" / "imageio_test_images" / "Blackmagic_PocketCinema4K_12bit.dng"
     if dng.is_file():
-        r = ratios(str(dng), 2048, model, upsample, refine)
+        r = ratios(str(dng), 2048, chain, model, upsample, refine)
         rows.append({"photo": os.path.relpath(dng, shared_root() / "data"), **r})
         log(f"{rows[-1]['photo']:45s} {r['size']:5d} " + " ".join(f"{k}={r[k]:.3f}" for k in cv.MAP_NAMES))
     med = {k: float(np.median([r[k] for r in rows[:len(photos)]])) for k in cv.MAP_NAMES}

@@ -135,8 +135,7 @@ def run(names=None, iterations=refine.DEFAULT_ITERATIONS, limit=None, repeat=3, 
 def figure(photos, path, iterations=refine.DEFAULT_ITERATIONS, tile=192, side_light=(1.4, 0.9, cv.CAMERA_HEIGHT)):
     """Before/after figure: for each photo (as ``svbrdf capture --crop none`` feeds it), the physical
     estimate's and the refined diffuse, normal and roughness, and both rendered under a side light."""
-    import cv2
-
+    from export.render.figure import captioned_tile
     from svbrdf_cli.imageio import read_image, write_image
     from svbrdf_cli.pipeline import network_input, resize
     from svbrdf_cli.shading import render_maps
@@ -158,15 +157,7 @@ def figure(photos, path, iterations=refine.DEFAULT_ITERATIONS, tile=192, side_li
             lin_maps = cv.decode_maps(st)
             k = refine.fit_intensity(cv.image_to_linear(image), refine._params(st), geo)
             cells.append((label, cv.image_to_encoded(render_maps(lin_maps, light=side_light, intensity=k))))
-        row = []
-        for title, img in cells:
-            img = np.repeat(img, 3, -1) if img.shape[-1] == 1 else img
-            t = cv2.resize(np.ascontiguousarray(img, np.float32), (tile, tile), interpolation=cv2.INTER_AREA)
-            t = np.ascontiguousarray((np.clip(t, 0, 1) * 255 + 0.5).astype(np.uint8))
-            t[-16:] = t[-16:] // 3
-            cv2.putText(t, title, (4, tile - 5), cv2.FONT_HERSHEY_SIMPLEX, 0.38, (255, 255, 255), 1, cv2.LINE_AA)
-            row.append(t)
-        rows.append(np.concatenate(row, 1))
+        rows.append(np.concatenate([captioned_tile(img, title, tile) for title, img in cells], 1))
     write_image(path, np.concatenate(rows, 0).astype(np.float32) / 255)
 
 

@@ -214,6 +214,7 @@ def gallery_figure(examples, path, tile=160):
     """Worst cases: input, perturbed input, and the diffuse, normal and roughness maps clean vs perturbed."""
     import cv2
 
+    from export.render.figure import captioned_tile
     from svbrdf_cli.imageio import write_image
 
     rows = []
@@ -221,14 +222,7 @@ def gallery_figure(examples, path, tile=160):
         cells = [("perturbed input", cv.image_to_encoded(np.clip(src, 0, None)))]
         for k in ("diffuse", "normal", "roughness"):
             cells += [(f"{k}, clean", ref[k]), (f"{k}, perturbed", maps[k])]
-        row = []
-        for title, img in cells:
-            t = cv2.resize(np.ascontiguousarray(np.repeat(img, 3, -1) if img.shape[-1] == 1 else img, np.float32),
-                           (tile, tile), interpolation=cv2.INTER_AREA)
-            t = np.ascontiguousarray((np.clip(t, 0, 1) * 255 + 0.5).astype(np.uint8))
-            t[-16:] = t[-16:] // 3  # a dark band under the label
-            cv2.putText(t, title, (4, tile - 5), cv2.FONT_HERSHEY_SIMPLEX, 0.36, (255, 255, 255), 1, cv2.LINE_AA)
-            row.append(t)
+        row = [captioned_tile(img, title, tile) for title, img in cells]
         head = np.full((22, tile * len(cells), 3), 255, np.uint8)
         cv2.putText(head, f"{label} on {name}: mean map change {change:.3f}", (4, 16), cv2.FONT_HERSHEY_SIMPLEX,
                     0.45, (0, 0, 0), 1, cv2.LINE_AA)

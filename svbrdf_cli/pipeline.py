@@ -348,7 +348,9 @@ def capture(prepared, chain, out_root, opts, model_name="fast"):
         upsampling = "model at output size"
     else:
         start = upsample_maps(stored, net_in, high, opts.upsample)
-    if refined is not None:
+    if refined is not None and side == NETWORK_SIZE:
+        start = low_refined
+    elif refined is not None:
         from svbrdf_cli.refine import transfer
 
         start = transfer(stored, low_refined, start)

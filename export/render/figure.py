@@ -40,6 +40,19 @@ def _label(tile, text):
     return out
 
 
+def captioned_tile(img, title, size):
+    """An (H, W, 1 or 3) float image in [0, 1] -> a ``size``² uint8 tile with ``title`` on a dark band at its foot."""
+    import cv2
+
+    img = np.repeat(img, 3, -1) if img.shape[-1] == 1 else img
+    t = cv2.resize(np.ascontiguousarray(img, np.float32), (size, size), interpolation=cv2.INTER_AREA)
+    t = np.ascontiguousarray((np.clip(t, 0, 1) * 255 + 0.5).astype(np.uint8))
+    t[-16:] = t[-16:] // 3
+    cv2.putText(t, title, (4, size - 5), cv2.FONT_HERSHEY_SIMPLEX, 0.36 if size < 180 else 0.38, (255, 255, 255), 1,
+                cv2.LINE_AA)
+    return t
+
+
 def figure(materials, ids, size=256, mask_gain=2.0, with_maps=True):
     """Build the figure as an (H, W, 3) uint8 array (display encoding)."""
     rows = []
