@@ -79,8 +79,21 @@ def read_map_set(folder, names=None, linear_albedo=False):
     return stored_to_linear(read_stored_maps(folder, names), linear_albedo=linear_albedo)
 
 
-def write_map_set(folder, maps, bits=8):
-    """Write linear maps as a native map set (PNG, Des18 encoding)."""
+def write_map_set(folder, maps, bits=8, images=()):
+    """Write linear maps as a native map set (PNG, Des18 encoding); ``images``: more
+    :func:`svbrdf_cli.imageio.write_image` jobs encoded alongside."""
+    write_stored_set(folder, linear_to_stored(maps), bits, images)
+
+
+def write_stored_set(folder, stored, bits=8, images=()):
+    """Write stored-encoding maps (what a model returns) as a native map set, as they are: clipped to
+    [0, 1], roughness as grey RGB. ``images``: more :func:`svbrdf_cli.imageio.write_image` jobs
+    (path, pixels, bits, colour), encoded with the maps on the same threads."""
     os.makedirs(folder, exist_ok=True)
-    write_images([(os.path.join(folder, name + ".png"), img, bits, name in ("diffuse", "specular"))
-                  for name, img in linear_to_stored(maps).items()])
+    jobs = []
+    for name in cv.MAP_NAMES:
+        img = stored[name]
+        if name == "roughness":
+            img = np.repeat(img[..., :1], 3, axis=-1)
+        jobs.append((os.path.join(folder, name + ".png"), img, bits, name in ("diffuse", "specular")))
+    write_images(jobs + list(images))

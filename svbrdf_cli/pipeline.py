@@ -147,7 +147,11 @@ def guided_upsample(low, guide_low, guide_high, radius=GUIDE_RADIUS, eps=GUIDE_E
     a = _box(np.ascontiguousarray(cov / (var_g + eps)), radius)
     side = guide_high.shape[0]
     detail = guide_high - resize(g, side)[..., 0]
-    return resize(low, side).reshape(side, side, -1) + _resize_to(a, guide_high.shape) * detail[..., None]
+    out = resize(low, side).reshape(side, side, -1)
+    a = _resize_to(a, guide_high.shape)
+    a *= detail[..., None]
+    out += a
+    return out
 
 
 #: Maps that take the photo's detail in guided upsampling; the others are
@@ -177,10 +181,24 @@ def upsample_maps(stored, photo_low, photo_high, method="guided"):
             out[k] = guided_upsample(v, gl, gh)
         else:
             out[k] = resize(v, side).reshape(side, side, -1)
-    n = out["normal"] * 2.0 - 1.0
-    n[..., 2] = np.maximum(n[..., 2], 1e-3)  # stay in the upper hemisphere
-    out["normal"] = cv.encode_normals(cv.normalize(n))
-    return {k: v.clip(0.0, 1.0).astype(np.float32) for k, v in out.items()}
+    n = out["normal"]
+    n *= np.float32(2.0)
+    n -= np.float32(1.0)
+    np.maximum(n[..., 2], np.float32(1e-3), out=n[..., 2])  # stay in the upper hemisphere
+    # cv.normalize then cv.encode_normals, in place (the same sums, without numpy's slow reduction
+    # over a 3-long axis)
+    norm = n[..., 0] * n[..., 0]
+    norm += n[..., 1] * n[..., 1]
+    norm += n[..., 2] * n[..., 2]
+    norm += np.float32(1e-20)
+    np.sqrt(norm, out=norm)
+    n /= norm[..., None]
+    n *= np.float32(0.5)
+    n += np.float32(0.5)
+    for k, v in out.items():
+        np.clip(v, 0.0, 1.0, out=v)
+        out[k] = v if v.dtype == np.float32 else v.astype(np.float32)
+    return out
 
 
 def network_input(linear, gain_ev=None):
@@ -189,7 +207,7 @@ def network_input(linear, gain_ev=None):
     low = resize(linear, NETWORK_SIZE)
     if gain_ev is None:
         gain_ev = auto_exposure_gain(low)
-    return ingest.encode_for_network(low * np.float32(2.0 ** gain_ev))
+    return ingest.encode_for_network(low, 2.0 ** gain_ev)
 
 
 def confidence_maps(chain, net_in, stored, side):
@@ -337,7 +355,7 @@ def capture(prepared, chain, out_root, opts, model_name="fast"):
         low_refined, refined = refine_maps(p, chain, net_in, stored, opts.refine)
         timings["refine"] = refined["refine"]["seconds"]
     t_up = time.perf_counter()
-    high = ingest.encode_for_network(resize(p.crop.image, side) * gain) if side != NETWORK_SIZE else net_in
+    high = ingest.encode_for_network(resize(p.crop.image, side), gain, fast=True) if side != NETWORK_SIZE else net_in
     upsampling = opts.upsample if side != NETWORK_SIZE else None
     if side != NETWORK_SIZE and getattr(chain.used, "any_size", False):
         # a model that runs at any size (the physical estimate) runs again at the output size: the
@@ -358,12 +376,12 @@ def capture(prepared, chain, out_root, opts, model_name="fast"):
     for k, v in stored.items():
         if not np.isfinite(v).all():
             raise SvbrdfError(f"The model produced non-finite values for '{p.path}' ({k}); please report this photo.")
-    maps = stored_to_linear(stored)
+    maps = None  # linear maps, made only where needed (the native preset writes the stored ones)
     if opts.tileable:
         from svbrdf_cli.mapset import linear_to_stored
         from svbrdf_cli.tiling import make_tileable
 
-        maps = make_tileable(maps)
+        maps = make_tileable(stored_to_linear(stored))
         stored = linear_to_stored(maps)
     t2 = time.perf_counter()
     timings["upsample"] = t2 - t_up
@@ -397,11 +415,11 @@ def capture(prepared, chain, out_root, opts, model_name="fast"):
         record["confidence"] = {"passes": len(tta.CONFIDENCE_PASSES), "half_at_disagreement": tta.CONFIDENCE_HALF,
                                 "mean": {k: round(float(v.mean()), 4) for k, v in conf.items()}}
 
+    # the preview is encoded on the same threads as the maps (write_preset's images)
+    images = [("preview.png", preview_image(net_in, stored), 8, True)] if opts.preview else []
+
     def extra(tmp):
         names = []
-        if opts.preview:
-            write_image(os.path.join(tmp, "preview.png"), preview_image(net_in, stored))
-            names.append("preview.png")
         if conf is not None:
             os.makedirs(os.path.join(tmp, "confidence"))
             for k, v in conf.items():
@@ -425,8 +443,8 @@ def capture(prepared, chain, out_root, opts, model_name="fast"):
         record.update(rec)
         return names + [RECORD]
 
-    write_preset(opts.preset, folder, maps, bits=opts.bits, fmt=opts.fmt, force=opts.force, extra=extra,
-                 protect=(p.path,), name=opts.name, tileable=opts.tileable, ao=opts.ao)
+    write_preset(opts.preset, folder, maps, stored=stored, bits=opts.bits, fmt=opts.fmt, force=opts.force,
+                 extra=extra, protect=(p.path,), name=opts.name, tileable=opts.tileable, ao=opts.ao, images=images)
     return folder, record
 
 

@@ -296,11 +296,11 @@ def _check_options(bits, fmt, png_only=None):
 class _Files:
     """Collects the images of one set in a temporary folder, plus their roles."""
 
-    def __init__(self, tmp, bits, fmt, preset, normal_convention, tileable=False, ao=True):
+    def __init__(self, tmp, bits, fmt, preset, normal_convention, tileable=False, ao=True, images=()):
         self.tmp, self.bits, self.fmt, self.tileable, self.use_ao = tmp, bits, fmt, tileable, ao
         self._height = None
-        self._jobs = []
-        self.names = []
+        self._jobs = [(os.path.join(tmp, name), *job) for name, *job in images]  # the caller's, written alongside
+        self.names = [name for name, *_ in images]
         self.meta = {"generator": f"svbrdf {__version__}", "conventions_version": cv.CONVENTIONS_VERSION,
                      "preset": preset, "normal_map": normal_convention,
                      "roughness": "perceptual, GGX alpha = roughness^2", "files": {}}
@@ -373,7 +373,7 @@ def _check_maps(maps):
 # --------------------------------------------------------------------------
 
 def write_svbrdf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=(), name=None,
-                 tileable=False, ao=True):
+                 tileable=False, ao=True, images=(), stored=None):
     """Native set: ``normal.png diffuse.png roughness.png specular.png`` and
     ``texture_set.json`` (their roles and encodings).
 
@@ -382,10 +382,13 @@ def write_svbrdf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, pr
 
     Args:
         folder: the set's folder (must not exist unless ``force``).
-        maps: linear map set (see the module docstring).
+        maps: linear map set (see the module docstring), or None with ``stored``.
         bits: 8 or 16.
         fmt: "png" only.
         force: replace an existing folder.
+        images: more images for the set, (name, pixels, bits, colour) each, encoded with the maps.
+        stored: the maps already in the stored encoding (a capture's): written as they are, without
+            the round trip through linear units.
 
     Returns:
         List of the written paths.
@@ -393,11 +396,17 @@ def write_svbrdf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, pr
     from svbrdf_cli import mapset
 
     _check_options(bits, fmt, png_only="svbrdf")
-    _check_maps(maps)
+    _check_maps(maps if stored is None else stored)
 
     def files(tmp):
-        mapset.write_map_set(tmp, maps, bits=bits)
+        more = [(os.path.join(tmp, name), *job) for name, *job in images]
+        if stored is None:
+            mapset.write_map_set(tmp, maps, bits=bits, images=more)
+        else:
+            mapset.write_stored_set(tmp, stored, bits=bits, images=more)
+        names = [name for name, *_ in images]
         f = _Files(tmp, bits, fmt, "svbrdf", "OpenGL (+Y up)", tileable, ao)
+        f.names.extend(names)
         for name, role in zip(cv.MAP_NAMES, ("normal", "diffuse albedo (stored^2.2 = linear)", "roughness",
                                               "specular F0 (stored^2.2 = linear)")):
             space = "sRGB" if name in ("diffuse", "specular") else "linear"
@@ -409,7 +418,7 @@ def write_svbrdf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, pr
 
 
 def write_gltf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=(), name=None,
-                 tileable=False, ao=True):
+                 tileable=False, ao=True, images=()):
     """glTF 2.0 metallic-roughness set plus ``material.gltf`` (one textured quad).
 
     ``baseColor.png`` (sRGB), ``metallicRoughness.png`` (linear; R = 1 (no
@@ -426,7 +435,7 @@ def write_gltf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, prot
     base, metallic, rough = _metal_rough(maps)
 
     def files(tmp):
-        f = _Files(tmp, bits, fmt, "gltf", "OpenGL (+Y up)", tileable, ao)
+        f = _Files(tmp, bits, fmt, "gltf", "OpenGL (+Y up)", tileable, ao, images)
         f.colour("baseColor", base, "base colour")
         f.data("metallicRoughness", np.concatenate([f.ao(maps["normal"]), rough, metallic], -1),
                "R = ambient occlusion (glTF occlusionTexture), G = roughness, B = metallic")
@@ -443,7 +452,7 @@ def write_gltf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, prot
 
 
 def write_unreal(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=(), name=None,
-                 tileable=False, ao=True):
+                 tileable=False, ao=True, images=()):
     """Unreal Engine set, named as Unreal projects name textures: ``T_<Name>_BC`` (base colour, sRGB),
     ``T_<Name>_N`` (normal, DirectX), ``T_<Name>_ORM``, ``T_<Name>_H`` (height); ``<Name>`` is ``name``
     or the folder's (:func:`asset_name`), so sets imported into one folder never collide.
@@ -460,7 +469,7 @@ def write_unreal(folder, maps, *, bits=8, fmt="png", force=False, extra=None, pr
     base, metallic, rough = _metal_rough(maps)
 
     def files(tmp):
-        f = _Files(tmp, bits, fmt, "unreal", "DirectX (green flipped, Y down)", tileable, ao)
+        f = _Files(tmp, bits, fmt, "unreal", "DirectX (green flipped, Y down)", tileable, ao, images)
         t = f"T_{asset_name(folder, name)}_"
         f.colour(t + "BC", base, "base colour")
         f.data(t + "N", normals_to_directx(maps["normal"]), "normal (DirectX, Y down)")
@@ -473,7 +482,7 @@ def write_unreal(folder, maps, *, bits=8, fmt="png", force=False, extra=None, pr
 
 
 def write_unity_hdrp(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=(), name=None,
-                 tileable=False, ao=True):
+                 tileable=False, ao=True, images=()):
     """Unity HDRP Lit set: ``<Name>_BaseMap`` (sRGB), ``<Name>_MaskMap`` (RGBA), ``<Name>_Normal``,
     ``<Name>_Height``; ``<Name>`` is ``name`` or the folder's (:func:`asset_name`).
 
@@ -490,7 +499,7 @@ def write_unity_hdrp(folder, maps, *, bits=8, fmt="png", force=False, extra=None
     one = np.ones_like(rough)
 
     def files(tmp):
-        f = _Files(tmp, bits, fmt, "unity-hdrp", "OpenGL (+Y up)", tileable, ao)
+        f = _Files(tmp, bits, fmt, "unity-hdrp", "OpenGL (+Y up)", tileable, ao, images)
         t = f"{asset_name(folder, name)}_"
         f.colour(t + "BaseMap", base, "base colour")
         f.data(t + "MaskMap", np.concatenate([metallic, f.ao(maps["normal"]), one, 1.0 - rough], -1),
@@ -538,7 +547,7 @@ def blender_prefix(folder, name=None):
 
 
 def write_blender(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=(), name=None,
-                 tileable=False, ao=True):
+                 tileable=False, ao=True, images=()):
     """Blender set, named for Node Wrangler's Principled Texture Setup (Ctrl+Shift+T).
 
     ``<name>_BaseColor.png`` (sRGB), ``<name>_Roughness`` and
@@ -557,7 +566,7 @@ def write_blender(folder, maps, *, bits=8, fmt="png", force=False, extra=None, p
     prefix = blender_prefix(folder, name)
 
     def files(tmp):
-        f = _Files(tmp, bits, fmt, "blender", "OpenGL (+Y up)", tileable, ao)
+        f = _Files(tmp, bits, fmt, "blender", "OpenGL (+Y up)", tileable, ao, images)
         f.colour(f"{prefix}_BaseColor", base, "base colour")
         f.data(f"{prefix}_Roughness", rough, "roughness (Non-Color)")
         f.data(f"{prefix}_Metallic", metallic, "metallic (Non-Color)")
@@ -577,7 +586,7 @@ PRESETS = {"svbrdf": write_svbrdf, "gltf": write_gltf, "unreal": write_unreal,
 PNG_ONLY_PRESETS = ("svbrdf", "gltf")
 
 
-def write_preset(preset, folder, maps, **kwargs):
+def write_preset(preset, folder, maps, stored=None, **kwargs):
     """Write ``maps`` as the texture set ``preset`` (a key of :data:`PRESETS`).
 
     Keyword arguments: ``bits``, ``fmt``, ``force``, ``extra`` (a function
@@ -587,12 +596,22 @@ def write_preset(preset, folder, maps, **kwargs):
     material's name in engine file names, :func:`asset_name`),
     ``tileable`` (the maps wrap: the height map is integrated periodically)
     and ``ao`` (ambient occlusion from the height in ORM, MaskMap and glTF's
-    occlusion channel; False: a constant 1).
+    occlusion channel; False: a constant 1), ``images`` (more images for the set, each
+    ``(name, pixels, bits, colour)``, encoded together with the preset's own).
+
+    ``stored``: the maps in the stored encoding, instead of ``maps`` (None): the native preset writes
+    them as they are, the others decode them first.
     """
     try:
         writer = PRESETS[preset]
     except KeyError:
         raise ValueError(f"Unknown preset {preset!r}; choose one of {', '.join(PRESETS)}.") from None
+    if stored is not None and maps is None:
+        if writer is write_svbrdf:
+            return writer(folder, None, stored=stored, **kwargs)
+        from svbrdf_cli.mapset import stored_to_linear
+
+        maps = stored_to_linear(stored)
     return writer(folder, maps, **kwargs)
 
 
