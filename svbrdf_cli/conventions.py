@@ -223,6 +223,35 @@ LUMA = (0.2126, 0.7152, 0.0722)
 AUTO_EXPOSURE_MEAN = 0.32
 
 
+#: An encoded photo's pixels at or above this fraction of its clip level are clipped.
+CLIPPED = 0.98
+#: A photo whose brightest value is held by at least this share of its pixels (to within
+#: CLIP_PLATEAU_TOLERANCE of it, relative: the same value) was clipped there: the camera's
+#: ceiling, moved down by an exposure gain. (Measured at 256²: the exposed real photos whose
+#: highlight clipped hold 0.45-1.3 % of their pixels there, the unclipped ones at most 0.04 %.)
+CLIP_PLATEAU_SHARE = 0.003
+CLIP_PLATEAU_TOLERANCE = 1e-4
+
+
+def clip_level(image):
+    """The encoded value at which an encoded (H, W, 3) photo was clipped.
+
+    A camera clips at its white (1.0); a photo darkened afterwards (``svbrdf capture``'s auto
+    exposure, a validation input rendered that way) holds its clipped highlight as a flat plateau
+    at a lower value, whose pixels say only "at least this bright". Such a plateau (many pixels at
+    exactly the photo's brightest value, which an unclipped photo's smooth peak never has) gives
+    its level; otherwise 1.0.
+    """
+    x = np.asarray(image, np.float32)
+    top_channel = np.maximum(np.maximum(x[..., 0], x[..., 1]), x[..., 2])
+    top = float(top_channel.max()) if top_channel.size else 1.0
+    if top >= CLIPPED or top <= 0.0:
+        return 1.0
+    if float((top_channel >= top * (1.0 - CLIP_PLATEAU_TOLERANCE)).mean()) >= CLIP_PLATEAU_SHARE:
+        return top
+    return 1.0
+
+
 def surface_positions(height, width):
     """World positions of pixel centres on the surface.
 

@@ -11,10 +11,15 @@ What a flash photo of a flat surface tells us for free, computed rather than lea
   around it is fitted by the diffuse falloff ``c0 s(rho)`` plus the flash highlight
   ``c1 lobe_r(rho)``, over flash heights and roughness values (:func:`fit_lobe`): the lobe's
   width gives the roughness, ``c0`` the diffuse level.
-* **diffuse**: the linear photo less the fitted highlight's share of each pixel (taken off as
-  white, hue kept), divided by the shading a flat surface gets from the flash
-  (``P * H / d^3``) and by ``1 - F0``; pixels the highlight clipped or dominates are filled in
-  from their surroundings, and any trend with the distance to the foot is divided out.
+* **diffuse**: the linear photo less the highlight, divided by the shading a flat surface gets
+  from the flash (``P * H / d^3``) and by ``1 - F0``. Where the material has a colour, the
+  highlight is read per pixel from it (:func:`separate_by_colour`, the dichromatic model: a
+  highlight adds white, which changes a pixel's whiteness but not its hue, and the whiteness
+  is read on the same hue away from the flash), so glossy tiles lose their highlight while the
+  matte grout between them keeps its level; on greys, the fitted lobe's share of each pixel
+  is taken off as white. Pixels the highlight clipped or dominates are filled in from their
+  surroundings, and any trend with the distance to the foot is divided out (for the greys on
+  their own first).
 * **specular**: dielectrics (the great majority of real surfaces) get F0 =
   :data:`svbrdf_cli.conventions.DIELECTRIC_F0`. A metal hypothesis (a highlight far too strong
   for a dielectric over a dark diffuse) exists but is off by default (:data:`DETECT_METALS`:
@@ -46,7 +51,7 @@ from svbrdf_cli import conventions as cv
 
 #: Bumped whenever the estimate's output changes: a network trained to refine one version
 #: must be fed that version (written into exported models and checked when they load).
-PHYSICAL_VERSION = "4"
+PHYSICAL_VERSION = "5"
 
 #: Roughness values the lobe fit tries (the lobe's width picks one).
 ROUGHNESS_GRID = np.linspace(0.08, 1.0, 47)
@@ -83,8 +88,31 @@ DETAIL_RANGE = 1.5
 #: Under the highlight, subtracting white leaves the weakest channel at least this
 #: fraction of its value (so no channel empties and the hue is kept).
 SUBTRACT_FLOOR = 0.25
-#: Encoded values at or above this are clipped.
-CLIPPED = 0.98
+#: Encoded values at or above this (times the photo's clip level) are clipped.
+CLIPPED = cv.CLIPPED
+#: Separate the highlight from the diffuse by colour where the material has one
+#: (:func:`separate_by_colour`): the dichromatic reflection model.
+COLOUR_SEPARATION = True
+#: Hue bins of the colour separation's hue-aware spreading, and the least (trust-weighted) share of
+#: the image a hue must cover to be read at all.
+HUE_BINS = 12
+WHITENESS_MIN_SHARE = 0.002
+#: The whiteness is read only where the fitted lobe's share of the brightness is under this.
+READ_SHARE = 0.2
+#: ... and used where it takes off more than COLOUR_RAMP[0] of a pixel's brightness (fully from
+#: COLOUR_RAMP[1]): less is the photo's noise.
+COLOUR_RAMP = (0.05, 0.2)
+#: The whiteness is spread on a copy of at most this side.
+SPREAD_SIDE = 256
+#: Pixels whose (white-balanced) saturation is under this say nothing about their diffuse's colour.
+MIN_SATURATION = 0.08
+#: The colour separation is trusted fully for a diffuse whiteness (min over max channel) up to
+#: ``WHITE_FULL`` and not at all from ``WHITE_NONE`` (greys and whites: a highlight cannot be told
+#: from them by colour; the lobe's share is taken off there).
+WHITE_FULL, WHITE_NONE = 0.4, 0.7
+#: Encoded values at or above this have lost their colour to the sensor's range (the weakest
+#: channel of a near-clipped pixel is all highlight).
+NEAR_CLIPPED = 0.95
 #: Normals from shading (:func:`normal_map`): the high-pass scale (fraction of the image
 #: width), the regularisation of the tilt under the flash (squared lateral light
 #: component), and the strength: the strongest whose normal RMSE on 64 generated photos
@@ -255,18 +283,24 @@ def fit_lobe(lum, clipped, rho, geo, metals=False):
     return Lobe(float(r), c0, c1, float(h), bool(metal), 1.0 - res / max(res_flat, 1e-20))
 
 
-def flatten_radial(diffuse, rho, rings=PROFILE_RINGS // 2):
+def flatten_radial(diffuse, rho, rings=PROFILE_RINGS // 2, weights=None):
     """Divide out what is left of the flash in the diffuse: its mean log-brightness as a function of
     the distance to the foot, smoothed, relative to the whole image's.
 
     An albedo has no reason to brighten or darken with the distance to where the flash happened to
     point, so any such trend is the model's mismatch (a highlight sharper than the fitted lobe, a
     falloff steeper than the fitted height) and is removed; the mean level is kept.
+
+    ``weights`` (H, W) in [0, 1], when given, restrict both the trend and its removal to a class of
+    pixels (in proportion): e.g. the greys, whose highlight was taken off by the lobe's share.
     """
     logl = np.log(np.maximum(_luma(diffuse), 1e-5)).ravel().astype(np.float64)
     ring, centres = _rings(rho, rings)
-    n = np.bincount(ring, minlength=rings).astype(np.float64)
-    mean = np.bincount(ring, weights=logl, minlength=rings) / np.maximum(n, 1)
+    wt = np.ones(logl.shape) if weights is None else np.asarray(weights, np.float64).ravel()
+    n = np.bincount(ring, weights=wt, minlength=rings)
+    if weights is not None:
+        n = np.where(n >= 4.0, n, 0.0)  # a ring with a few such pixels says nothing
+    mean = np.bincount(ring, weights=logl * wt, minlength=rings) / np.maximum(n, 1e-12)
     mean = np.where(n > 0, mean, np.nan)
     valid = ~np.isnan(mean)
     if valid.sum() < 3:
@@ -275,6 +309,8 @@ def flatten_radial(diffuse, rho, rings=PROFILE_RINGS // 2):
     smooth = np.convolve(np.pad(mean, 1, mode="edge"), np.ones(3) / 3, mode="valid")
     level = float((n * smooth).sum() / n.sum())
     trend = np.interp(rho.ravel(), centres, smooth - level).reshape(rho.shape)
+    if weights is not None:
+        trend = trend * weights
     return (diffuse * np.exp(-trend)[..., None]).astype(np.float32)
 
 
@@ -310,6 +346,120 @@ def fill_from_surroundings(x, mask, detail=None):
     if detail is not None:
         fill = fill * detail[..., None]
     return np.where(m[..., None], fill, x).astype(np.float32)
+
+
+def _hue(x):
+    """Hue angle (radians) of RGB ``x``: unchanged by adding white."""
+    return np.arctan2(np.sqrt(3.0) * (x[..., 1] - x[..., 2]), 2.0 * x[..., 0] - x[..., 1] - x[..., 2])
+
+
+def _spread(values, weights, confident=0.05):
+    """Weighted push-pull of ``values`` (H, W) by ``weights`` (H, W): where the weights are high a
+    pixel keeps its own weighted local average, elsewhere it takes the nearest well-weighted region's
+    (halvings until every pixel is reached, then back up). Returns (H, W)."""
+    import cv2
+
+    num, den = np.ascontiguousarray(values * weights, np.float32), np.ascontiguousarray(weights, np.float32)
+    pyramid = [(num, den)]
+    while min(den.shape) > 1:
+        h, w = den.shape
+        size = (max(1, w // 2), max(1, h // 2))
+        num = cv2.resize(num, size, interpolation=cv2.INTER_AREA)
+        den = cv2.resize(den, size, interpolation=cv2.INTER_AREA)
+        pyramid.append((num, den))
+    num, den = pyramid[-1]
+    out = num / np.maximum(den, 1e-12)
+    for num, den in reversed(pyramid[:-1]):
+        h, w = den.shape
+        up = cv2.resize(out, (w, h), interpolation=cv2.INTER_LINEAR).reshape(h, w)
+        c = np.clip(den / confident, 0.0, 1.0)
+        out = c * num / np.maximum(den, 1e-12) + (1.0 - c) * up
+    return out
+
+
+def separate_by_colour(lin, share, tint, unreliable, reference=None):
+    """The diffuse part of each pixel by the dichromatic reflection model, and how far to trust it.
+
+    A dielectric's highlight adds the flash's colour (``tint``) to the diffuse colour: in a
+    white-balanced pixel it raises every channel by the same amount. So the pixel less its weakest
+    channel keeps the diffuse's hue and chroma exactly (a "specular-free" image); what the highlight
+    hides is only the diffuse's **whiteness** ``w`` (weakest over strongest channel). ``w`` is a
+    property of the material, not of the lighting: it is read where the highlight is weak and
+    spread, averaged within hue (so a blue tile takes a blue tile's, not its green neighbour's),
+    to the pixels under the highlight. Each pixel's diffuse is then its specular-free colour plus
+    the white that gives it that whiteness, and never more than the pixel itself.
+
+    This reads the highlight per pixel, so glossy tiles lose theirs while the matte grout between
+    them keeps its colour (the lobe's share, one smooth function of the distance, cannot tell the
+    two apart). Greys and whites carry no such evidence: the trust (second output) falls to 0 for
+    whiteness from :data:`WHITE_FULL` to :data:`WHITE_NONE`, where too few pixels of the hue are
+    seen outside the highlight, and where the pixel is ``unreliable`` (near-clipped).
+
+    Args:
+        lin: (H, W, 3) linear photo.
+        share: (H, W) the fitted lobe's share of each pixel's brightness (0 far from the highlight).
+        tint: the highlight's colour (RGB, unit luminance).
+        unreliable: (H, W) bool, pixels whose colour is lost (near-clipped).
+        reference: (H, W, 3) what the whiteness is read from (default ``lin``): the photo less the
+            lobe's share, so that the weak highlight where it is read does not whiten it.
+
+    Returns:
+        ((H, W, 3) linear diffuse part of each pixel, (H, W) trust in [0, 1]).
+    """
+    import cv2
+
+    ln = np.asarray(lin, np.float32) / tint
+    lo = np.minimum(np.minimum(ln[..., 0], ln[..., 1]), ln[..., 2])  # (faster than .min(-1))
+    hi = np.maximum(np.maximum(ln[..., 0], ln[..., 1]), ln[..., 2])
+    spread = hi - lo
+    whiteness = lo / np.maximum(hi, 1e-6)
+    if reference is not None:
+        rf = np.asarray(reference, np.float32) / tint
+        rlo = np.minimum(np.minimum(rf[..., 0], rf[..., 1]), rf[..., 2])
+        rhi = np.maximum(np.maximum(rf[..., 0], rf[..., 1]), rf[..., 2])
+        read = np.clip(rlo / np.maximum(rhi, 1e-6), 0.0, 1.0)
+    else:
+        read = whiteness
+    coloured = spread > MIN_SATURATION * hi
+    trust_px = (np.clip(1.0 - share / READ_SHARE, 0.0, 1.0) ** 2 * coloured * ~unreliable).astype(np.float32)
+    hue = _hue(ln).astype(np.float32)
+
+    def member(k):  # soft hue bins
+        m = np.maximum(np.cos(hue - np.float32(2.0 * np.pi * k / HUE_BINS - np.pi)), np.float32(0.0))
+        m *= m
+        return m * m
+
+    # per hue bin, the whiteness of the trusted pixels spread to every pixel; a bin seen too little
+    # outside the highlight (under WHITENESS_MIN_SHARE of the image) gives nothing
+    # (on at most a SPREAD_SIDE² copy: the spread is coarse, and the estimate runs at the output size)
+    h, wd = lo.shape
+    f = min(1.0, SPREAD_SIDE / max(h, wd))
+    small = (max(1, round(wd * f)), max(1, round(h * f)))
+
+    def down(x):
+        return cv2.resize(np.ascontiguousarray(x, np.float32), small, interpolation=cv2.INTER_AREA) if f < 1 else x
+
+    def up(x):
+        return cv2.resize(x, (wd, h), interpolation=cv2.INTER_LINEAR) if f < 1 else x
+
+    w = np.zeros(lo.shape, np.float32)
+    seen = np.zeros(lo.shape, np.float32)
+    total = np.zeros(lo.shape, np.float32)
+    for k in range(HUE_BINS):
+        m = member(k)
+        total += m
+        wt = m * trust_px
+        if float(wt.mean()) < WHITENESS_MIN_SHARE:
+            continue
+        w += m * up(_spread(down(read * wt) / np.maximum(down(wt), 1e-12), down(wt)))
+        seen += m
+    w = np.where(seen > 1e-6, w / np.maximum(seen, 1e-6), 1.0)
+    seen = np.clip(seen / np.maximum(total, 1e-6), 0.0, 1.0)
+    w = np.clip(np.minimum(w, whiteness), 0.0, WHITE_NONE)  # a highlight only whitens a pixel
+    diffuse = (ln - lo[..., None]) + (w * spread / (1.0 - w))[..., None]
+    diffuse = np.clip(diffuse, 0.0, ln) * tint
+    trust = np.clip((WHITE_NONE - w) / (WHITE_NONE - WHITE_FULL), 0.0, 1.0) * seen * coloured * ~unreliable
+    return diffuse.astype(np.float32), trust.astype(np.float32)
 
 
 def specular_map(fit, lin, clipped, dominated, intensity):
@@ -371,7 +521,8 @@ def estimate(image, geo=None, normal_strength=None, with_fit=False, metals=None)
     img = np.asarray(image, np.float32)
     h, w = img.shape[:2]
     lin = cv.image_to_linear(img).astype(np.float32)
-    clipped = (img >= CLIPPED).any(-1)
+    level = cv.clip_level(img)  # a clipped highlight darkened by the exposure is clipped all the same
+    clipped = (img >= CLIPPED * level).any(-1)
     lum = _luma(lin)
     x, y = _grid(h, w)
     foot = geo.foot if geo.foot is not None else flash_foot(lum, x, y)
@@ -393,16 +544,36 @@ def estimate(image, geo=None, normal_strength=None, with_fit=False, metals=None)
     # so the hue stays the photo's) rather than the pixel being scaled, which would leave the
     # highlight's whiteness in the diffuse (a pale disc, and greyer colours).
     share = (spec_rad / np.maximum(model, 1e-6))[..., None]
-    tint = f0 / max(float(_luma(f0[None])[0]), 1e-6)  # the highlight's colour, unit luminance
+    tint = f0 / max(float(_luma(f0[None])[0]), 1e-6)  # the highlight's colour (white but for a metal)
     white = np.minimum(share * lum[..., None], (1.0 - SUBTRACT_FLOOR) * (lin / tint).min(-1, keepdims=True))
-    diffuse = (lin - white * tint) / (geo.intensity * shading[..., None]) / keep
+    base = lin - white * tint
     bad = clipped | (share[..., 0] > HIGHLIGHT_SHARE)  # what is left there is mostly the highlight's
+    flat_fill = clipped  # filled without the photo's texture: what is left there is the highlight's
+    grey = None
+    if COLOUR_SEPARATION and not fit.metal and fit.specular > 0:
+        # where the diffuse has a colour, the highlight is read per pixel from it (glossy tiles lose
+        # theirs, the matte grout keeps its own); the lobe's smooth share elsewhere
+        near = np.maximum(np.maximum(img[..., 0], img[..., 1]), img[..., 2]) >= NEAR_CLIPPED * level
+        by_colour, coloured = separate_by_colour(lin, share[..., 0], tint, near, reference=base)
+        # only where the colour says there is a highlight (a ramp, so no edge shows), near the flash
+        taken = 1.0 - _luma(by_colour) / np.maximum(lum, 1e-6)
+        trust = (coloured * np.clip((taken - COLOUR_RAMP[0]) / (COLOUR_RAMP[1] - COLOUR_RAMP[0]), 0.0, 1.0)
+                 * np.clip(share[..., 0] / 0.02, 0.0, 1.0))
+        # a pixel the highlight dominates keeps too little of its colour to read: filled from around it
+        dominated = (trust > 0.5) & (_luma(by_colour) < (1.0 - HIGHLIGHT_SHARE) * lum)
+        base = trust[..., None] * by_colour + (1.0 - trust[..., None]) * base
+        flat_fill = clipped | (near & (share[..., 0] > 0.05)) | dominated
+        bad = flat_fill | ((share[..., 0] > HIGHLIGHT_SHARE) & (trust < 0.5))
+        grey = 1.0 - coloured  # (filled pixels included: they take their surroundings' level)
+    diffuse = base / (geo.intensity * shading[..., None]) / keep
     rel = None
     if bad.any():  # the texture under the highlight: the photo's brightness over its neighbourhood's (the
         # lobe is smooth at that scale), none where it clipped
         rel = np.clip(lum / np.maximum(_blur(lum, max(1.0, w / 64.0)), 1e-6), 1.0 / DETAIL_RANGE, DETAIL_RANGE)
-        rel = np.where(clipped, 1.0, rel).astype(np.float32)
+        rel = np.where(flat_fill, 1.0, rel).astype(np.float32)
     diffuse = fill_from_surroundings(np.clip(diffuse, 0.0, None).astype(np.float32), bad, rel)
+    if grey is not None and 0.02 < float(grey.mean()) < 0.98:  # the greys' own trend first (their highlight was
+        diffuse = flatten_radial(diffuse, rho, weights=grey)  # taken off by the lobe's share, the rest's by colour)
     diffuse = flatten_radial(diffuse, rho)
     diffuse = np.clip(np.nan_to_num(diffuse, nan=0.0, posinf=1.0), 0.0, 1.0).astype(np.float32)
     light_xy = np.stack([foot[0] - x, foot[1] - y], -1) / d[..., None]

@@ -47,8 +47,8 @@ MAX_ITERATIONS = 5000
 #: Resolutions of the coarse-to-fine schedule (fractions of the working size), and the share of
 #: the iterations each gets.
 LEVELS = ((0.25, 0.3), (0.5, 0.3), (1.0, 0.4))
-#: Encoded pixels at or above this were clipped by the camera.
-CLIPPED = 0.98
+#: Encoded pixels at or above this (times the photo's clip level) were clipped by the camera.
+CLIPPED = cv.CLIPPED
 #: Pixels this close (a fraction of the width) to a clipped one are left out of the photo term
 #: (the edge of a clipped blob is partly clipped too).
 CLIP_MARGIN = 0.008
@@ -121,7 +121,8 @@ def _unclipped(photo_lin):
     """(H, W, 1) weight: 0 at clipped pixels and within :data:`CLIP_MARGIN` of one, else 1."""
     import cv2
 
-    clipped = (photo_lin >= cv.image_to_linear(np.float32(CLIPPED))).any(-1).astype(np.uint8)
+    level = cv.clip_level(cv.image_to_encoded(photo_lin))  # (a clipped highlight the exposure darkened)
+    clipped = (photo_lin >= cv.image_to_linear(np.float32(CLIPPED * level))).any(-1).astype(np.uint8)
     r = max(1, int(round(CLIP_MARGIN * photo_lin.shape[0])))
     if clipped.any():
         clipped = cv2.dilate(clipped, np.ones((2 * r + 1, 2 * r + 1), np.uint8))

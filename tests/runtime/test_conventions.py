@@ -65,3 +65,17 @@ def test_aux_light_intensities_match_flash_irradiance_at_centre():
     d = np.linalg.norm(p, axis=1)
     irradiance = e * (p[:, 2] / d) / d ** 2
     assert np.allclose(irradiance, 2.0 / cv.CAMERA_HEIGHT ** 2)
+
+
+def test_clip_level_finds_a_clipped_highlight_the_exposure_darkened():
+    rng = np.random.default_rng(0)
+    photo = rng.uniform(0.1, 0.6, (128, 128, 3)).astype(np.float32)
+    assert cv.clip_level(photo) == 1.0  # nothing clipped
+    photo[50:60, 50:60] = 1.0  # clipped at the camera's white
+    assert cv.clip_level(photo) == 1.0
+    darker = photo * np.float32(0.7)  # then darkened: the plateau moves down with it
+    assert cv.clip_level(darker) == pytest.approx(0.7)
+    peak = photo.copy()
+    peak[50:60, 50:60] = 0.6 + 0.002 * rng.random((10, 10, 3))  # a smooth bright area is no plateau
+    peak[55, 55] = 0.65
+    assert cv.clip_level(peak) == 1.0

@@ -129,3 +129,64 @@ def test_model_interface_matches_the_chain():
     assert set(cv.MAP_NAMES) <= set(out) and m.used is m
     assert m.describe()["tier"] == "physical" and "roughness" in m.describe()["found"]
     assert "physical" in m.timings
+
+
+def _tiles_in_grout():
+    """Glossy teal tiles (roughness 0.2) in matte grey grout (roughness 1), as a flash photo, and the
+    masks of grout, of the pixels near the highlight and of those far from it."""
+    yy, xx = np.mgrid[:SIZE, :SIZE]
+    grout = ((yy % 16) < 3) | ((xx % 16) < 3)
+    diffuse = np.where(grout[..., None], [0.3, 0.3, 0.3], [0.08, 0.3, 0.4])
+    roughness = np.where(grout, 1.0, 0.2)[..., None]
+    n = np.zeros((SIZE, SIZE, 3)) + [0.0, 0.0, 1.0]
+    img = render(n, diffuse, roughness, np.full((SIZE, SIZE, 3), cv.DIELECTRIC_F0), intensity=0.5 * cv.FLASH_INTENSITY)
+    rho = np.hypot(xx - SIZE / 2, yy - SIZE / 2)
+    return cv.image_to_encoded(img).astype(np.float32), grout, rho < 20, rho > 45
+
+
+@pytest.mark.parametrize("by_colour", [False, True])
+def test_glossy_tiles_lose_their_highlight_and_matte_grout_keeps_its_level(by_colour, monkeypatch):
+    """One smooth lobe cannot say that the tiles shine and the grout does not; the tiles' colour can
+    (the dichromatic model). Without it (the estimate before it), the grout under the flash came out
+    28 % darker than elsewhere (a dark cross in the diffuse) and the tiles kept the highlight as a
+    pale disc (red channel 1.7x)."""
+    monkeypatch.setattr(physical, "COLOUR_SEPARATION", by_colour)
+    img, grout, near, far = _tiles_in_grout()
+    d = _linear(physical.estimate(img)[0])["diffuse"]
+    grout_ratio = d[grout & near].mean(0) / d[grout & far].mean(0)
+    tile_ratio = d[~grout & near].mean(0) / d[~grout & far].mean(0)
+    if by_colour:
+        assert grout_ratio.min() > 0.85 and tile_ratio.max() < 1.3, (grout_ratio, tile_ratio)
+    else:  # the measurement the colour separation improves on: it fails these bounds
+        assert grout_ratio.min() < 0.8 and tile_ratio.max() > 1.5, (grout_ratio, tile_ratio)
+
+
+def test_colour_separation_reads_a_diffuse_under_white_from_the_same_hue_elsewhere():
+    """Half a coloured material as it is, half with white added (a highlight): the diffuse of the second
+    half comes back from the first's whiteness, and a grey patch (no colour to read) is not trusted."""
+    h, w = 64, 64
+    colour = np.array([0.1, 0.3, 0.5], np.float32)
+    lin = np.broadcast_to(colour, (h, w, 3)).copy()
+    share = np.zeros((h, w), np.float32)
+    lin[:, 40:] += 0.3
+    share[:, 40:] = 0.6
+    lin[:8, :8] = 0.4  # a grey patch
+    diffuse, trust = physical.separate_by_colour(lin, share, np.ones(3, np.float32), np.zeros((h, w), bool))
+    assert np.allclose(diffuse[20:, 44:], colour, rtol=0.02)
+    assert (trust[20:, 44:] > 0.99).all()
+    assert (trust[:6, :6] < 0.01).all()
+    assert np.allclose(diffuse[20:, :36], colour, rtol=1e-4)  # untouched where there was no highlight
+
+
+def test_clipped_highlight_darkened_by_the_exposure_is_filled_too():
+    """``svbrdf capture`` exposes the photo before the estimate: a highlight the camera clipped then
+    sits as a flat plateau under 1.0, and is still a clipped highlight, not a grey disc of albedo."""
+    img = _photo([0.04, 0.1, 0.14], cv.DIELECTRIC_F0, 0.12, intensity=3 * cv.FLASH_INTENSITY)
+    assert 0.003 < (img >= 0.999).all(-1).mean() and (img >= 0.95).any(-1).mean() < 0.1  # the highlight clipped
+    darker = cv.image_to_encoded(cv.image_to_linear(img) * np.float32(0.6)).astype(np.float32)
+    for photo in (img, darker):
+        stored, found = physical.estimate(photo)
+        assert abs(found["roughness"] - 0.12) < 0.05  # the plateau is no part of the lobe's shape
+        d = _linear(stored)["diffuse"]
+        centre = d[SIZE // 2 - 3:SIZE // 2 + 3, SIZE // 2 - 3:SIZE // 2 + 3].reshape(-1, 3)
+        assert np.abs(centre.mean(0) / np.median(d.reshape(-1, 3), 0) - 1).max() < 0.15
