@@ -3,8 +3,9 @@
 ``svbrdf capture`` and ``svbrdf batch`` (local engine) run :func:`run_local`; the Ray engine
 (:mod:`svbrdf_cli.ray_engine`) plans its work with the same :func:`plan_inputs` and reports
 failures with the same :func:`describe_failure`. Each photo is read, cropped and exposed while the
-previous one is in the model, written as one atomic set (:func:`svbrdf_cli.pipeline.capture`), and
-a bad photo is reported in one line and skipped.
+previous one is in the model, and written as one atomic set (:func:`svbrdf_cli.pipeline.infer_set`)
+on a thread of its own while the next one is in the model; a bad photo is reported in one line
+and skipped.
 """
 
 from __future__ import annotations
@@ -143,9 +144,30 @@ def run_local(files, job, failures=None):
         log.debug("details", exc_info=e)
         err(describe_failure(f, e))
 
-    # Read and crop the next photo while the current one is in the networks.
-    with concurrent.futures.ThreadPoolExecutor(max_workers=1) as pool, logging_redirect_tqdm():
-        pending = pool.submit(pipeline.prepare, todo[0], job.opts)
+    def finish(writing):
+        """Wait for a set being written on the writer thread; report it (or its failure)."""
+        nonlocal done
+        f, t0, future = writing
+        try:
+            folder, record = future.result()
+        except Exception as e:  # noqa: BLE001 - one bad photo never stops a batch
+            report_failure(f, e)
+        else:
+            done += 1
+            crop = record["crop"]
+            how = crop["mode"] + (f" on the {crop['anchor']}" if crop.get("anchor") else "")
+            if not job.quiet:
+                tqdm.write(f"{f} -> {folder} ({record['size']}x{record['size']}, crop {how}, "
+                           f"{time.perf_counter() - t0:.1f} s)", file=sys.stderr)
+        bar.update(1)
+
+    # Read and crop the next photo while the current one is in the networks, and write the previous
+    # set on another thread meanwhile: at most one set waits to be written (memory stays bounded).
+    reader = concurrent.futures.ThreadPoolExecutor(max_workers=1)
+    writer = concurrent.futures.ThreadPoolExecutor(max_workers=1)
+    writing = None
+    with reader, writer, logging_redirect_tqdm():
+        pending = reader.submit(pipeline.prepare, todo[0], job.opts)
         for i, f in enumerate(todo):
             t0 = time.perf_counter()
             try:
@@ -154,18 +176,22 @@ def run_local(files, job, failures=None):
                 prepared = None
                 report_failure(f, e)
             if i + 1 < len(todo):
-                pending = pool.submit(pipeline.prepare, todo[i + 1], job.opts)
+                pending = reader.submit(pipeline.prepare, todo[i + 1], job.opts)
+            write = None
             if prepared is not None:
                 try:
-                    folder, record = pipeline.capture(prepared, chain, job.output, job.opts, model_name=job.model)
-                    done += 1
-                    crop = record["crop"]
-                    how = crop["mode"] + (f" on the {crop['anchor']}" if crop.get("anchor") else "")
-                    if not job.quiet:
-                        tqdm.write(f"{f} -> {folder} ({record['size']}x{record['size']}, crop {how}, "
-                                   f"{time.perf_counter() - t0:.1f} s)", file=sys.stderr)
+                    write = pipeline.infer_set(prepared, chain, job.output, job.opts, model_name=job.model)
                 except Exception as e:  # noqa: BLE001
                     report_failure(f, e)
-            bar.update(1)
+                del prepared
+            if writing is not None:
+                finish(writing)
+                writing = None
+            if write is not None:
+                writing = (f, t0, writer.submit(write))
+            else:
+                bar.update(1)
+        if writing is not None:
+            finish(writing)
     bar.close()
     return Counts(done, skipped, len(todo) - done + failed)

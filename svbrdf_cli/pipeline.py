@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 import datetime
+import functools
 import hashlib
 import json
 import logging
@@ -121,7 +122,7 @@ def _resize_to(x, shape):
     return cv2.resize(x, (shape[1], shape[0]), interpolation=cv2.INTER_LINEAR).reshape(*shape, x.shape[-1])
 
 
-def guided_upsample(low, guide_low, guide_high, radius=GUIDE_RADIUS, eps=GUIDE_EPS):
+def guided_upsample(low, guide_low, guide_high, radius=GUIDE_RADIUS, eps=GUIDE_EPS, detail=None):
     """Bicubic upsampling plus the photo's own fine detail, scaled by a local regression.
 
     In each (2r+1)^2 window at network resolution the map is regressed on
@@ -135,6 +136,7 @@ def guided_upsample(low, guide_low, guide_high, radius=GUIDE_RADIUS, eps=GUIDE_E
         low: (h, w, C) map at network resolution.
         guide_low: (h, w) guide (the photo's encoded brightness) at that resolution.
         guide_high: (H, W) the same guide at the output resolution (square).
+        detail: ``guide_high`` less the guide's bicubic upsampling, if the caller has it already.
 
     Returns:
         (H, W, C) float32.
@@ -146,12 +148,19 @@ def guided_upsample(low, guide_low, guide_high, radius=GUIDE_RADIUS, eps=GUIDE_E
     cov = _box(np.ascontiguousarray(g * low), radius) - mean_g * _box(low, radius)
     a = _box(np.ascontiguousarray(cov / (var_g + eps)), radius)
     side = guide_high.shape[0]
-    detail = guide_high - resize(g, side)[..., 0]
+    if detail is None:
+        detail = guide_detail(guide_low, guide_high)
     out = resize(low, side).reshape(side, side, -1)
     a = _resize_to(a, guide_high.shape)
     a *= detail[..., None]
     out += a
     return out
+
+
+def guide_detail(guide_low, guide_high):
+    """What the output-size guide holds beyond the bicubic upsampling of the network-size one."""
+    g = np.ascontiguousarray(guide_low, np.float32)[..., None]
+    return guide_high - resize(g, guide_high.shape[0])[..., 0]
 
 
 #: Maps that take the photo's detail in guided upsampling; the others are
@@ -175,10 +184,11 @@ def upsample_maps(stored, photo_low, photo_high, method="guided"):
         raise ValueError(f"unknown upsampling method {method!r}")
     lum = np.asarray(cv.LUMA, np.float32)
     gl, gh = photo_low @ lum, photo_high @ lum
+    detail = guide_detail(gl, gh) if method == "guided" else None  # once for every guided map
     out = {}
     for k, v in stored.items():
         if method == "guided" and k in GUIDED_MAPS:
-            out[k] = guided_upsample(v, gl, gh)
+            out[k] = guided_upsample(v, gl, gh, detail=detail)
         else:
             out[k] = resize(v, side).reshape(side, side, -1)
     n = out["normal"]
@@ -241,7 +251,7 @@ def preview_image(network_input, stored, tile=256):
     tiles = [("photo", resize(network_input, tile)), ("normal", small["normal"]), ("diffuse", small["diffuse"]),
              ("roughness", np.repeat(small["roughness"][..., :1], 3, -1)), ("specular", small["specular"])]
     for name, light in PREVIEW_LIGHTS.items():
-        img = render_maps({k: v.astype(np.float64) for k, v in lin.items()}, light=light)
+        img = render_maps(lin, light=light)  # float32: the preview within 1/255 of float64, in 60% of its time
         tiles.append((f"relit: {name}", cv.image_to_encoded(img).astype(np.float32)))
     grid = np.zeros((2 * tile, 4 * tile, 3), np.float32)
     for i, (name, img) in enumerate(tiles):
@@ -335,9 +345,14 @@ def refine_maps(prepared, chain, net_in, stored, iterations):
 
 def capture(prepared, chain, out_root, opts, model_name="fast"):
     """Infer and write the texture set of a :class:`Prepared` photo; returns (folder, record)."""
-    from svbrdf_cli.imageio import write_image
+    return infer_set(prepared, chain, out_root, opts, model_name)()
+
+
+def infer_set(prepared, chain, out_root, opts, model_name="fast"):
+    """The model's part of :func:`capture` (infer, refine, upsample): returns a function of no
+    arguments that writes the set (preview, PNG encoding, the atomic rename) and returns (folder,
+    record). A batch runs it on a thread while the next photo is in the model."""
     from svbrdf_cli.mapset import stored_to_linear
-    from svbrdf_cli.presets import write_preset
 
     p = prepared
     folder = output_folder(out_root, p.path)
@@ -390,13 +405,12 @@ def capture(prepared, chain, out_root, opts, model_name="fast"):
     if opts.confidence:
         conf = confidence_maps(chain.used, net_in, {k: out[k] for k in cv.MAP_NAMES}, side)
         timings["confidence"] = time.perf_counter() - t2
-        t2 = time.perf_counter()  # "write" starts here
 
     record = {
         "tool": f"svbrdf {__version__}",
         "conventions_version": cv.CONVENTIONS_VERSION,
         "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        "input": {"file": os.path.abspath(p.path), "sha256": file_sha256(p.path), "kind": p.photo.kind,
+        "input": {"file": os.path.abspath(p.path), "sha256": None, "kind": p.photo.kind,
                   "bits": p.photo.bits, "width": int(p.photo.linear.shape[1]), "height": int(p.photo.linear.shape[0]),
                   "decoded_at": p.photo.scale},
         "model": {"name": model_name, **chain.describe()},
@@ -415,6 +429,17 @@ def capture(prepared, chain, out_root, opts, model_name="fast"):
         record["confidence"] = {"passes": len(tta.CONFIDENCE_PASSES), "half_at_disagreement": tta.CONFIDENCE_HALF,
                                 "mean": {k: round(float(v.mean()), 4) for k, v in conf.items()}}
 
+    # (the photo's path, not the Prepared: its decoded photo is not kept while the set is written)
+    return functools.partial(_write_set, p.path, folder, opts, record, timings, stored, maps, net_in, out, conf)
+
+
+def _write_set(path, folder, opts, record, timings, stored, maps, net_in, out, conf):
+    """The writing part of :func:`capture` (see :func:`infer_set`): returns (folder, record)."""
+    from svbrdf_cli.imageio import write_image
+    from svbrdf_cli.presets import write_preset
+
+    t2 = time.perf_counter()
+    record["input"]["sha256"] = file_sha256(path)
     # the preview is encoded on the same threads as the maps (write_preset's images)
     images = [("preview.png", preview_image(net_in, stored), 8, True)] if opts.preview else []
 
@@ -444,7 +469,7 @@ def capture(prepared, chain, out_root, opts, model_name="fast"):
         return names + [RECORD]
 
     write_preset(opts.preset, folder, maps, stored=stored, bits=opts.bits, fmt=opts.fmt, force=opts.force,
-                 extra=extra, protect=(p.path,), name=opts.name, tileable=opts.tileable, ao=opts.ao, images=images)
+                 extra=extra, protect=(path,), name=opts.name, tileable=opts.tileable, ao=opts.ao, images=images)
     return folder, record
 
 
