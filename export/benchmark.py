@@ -267,7 +267,7 @@ def run(limit=None, repeat=5, figures="docs/figures", tables="docs/tables", stab
         if os.path.isdir(root / "real" / "card_blue_9lights") else None
     work = tempfile.mkdtemp(prefix="svbrdf-bench-")
     rows, per_sample = [], {}
-    methods = method_zoo.available(threads)
+    methods = method_zoo.available(threads, refined=True)  # with the default capture's --refine
     nine_input = nine.network_input() if nine else None
     for method in methods:
         r = {"name": method.name, "label": method.label}

@@ -11,6 +11,7 @@ Des19 outputs are scored where the benchmarks need them.
 from __future__ import annotations
 
 import os
+import time
 
 import numpy as np
 
@@ -85,6 +86,35 @@ class Auto:
         return {k: out[k] for k in cv.MAP_NAMES}
 
 
+class Refined:
+    """``method`` followed by ``--refine`` (:func:`svbrdf_cli.refine.refine`) under the photo's estimated
+    geometry, as ``svbrdf capture`` runs it on a photo without EXIF (the height from the physical
+    estimate's falloff fit). ``timings`` collects the refinement's own seconds."""
+
+    def __init__(self, method, iterations, timings=None):
+        self.method, self.iterations, self.timings = method, int(iterations), timings
+        self.name = f"{method.name}+refine"
+        self.label = f"{method.label}, then --refine {self.iterations}"
+        self.chain = getattr(method, "chain", None)
+
+    def _flash_height(self, image):
+        from svbrdf_cli.physical import estimate
+
+        found = getattr(self.chain, "found", None) or estimate(image)[1]
+        return found["flash_height"]
+
+    def __call__(self, image):
+        from svbrdf_cli import geometry, refine
+
+        stored = self.method(image)
+        geo = geometry.estimate(image, height=self._flash_height(image))
+        t0 = time.perf_counter()
+        res = refine.refine(image, stored, geo, self.iterations)
+        if self.timings is not None:
+            self.timings.append(time.perf_counter() - t0)
+        return {k: res.stored[k] for k in cv.MAP_NAMES}
+
+
 def auto_rule():
     """The shipped ``--model auto`` rule, or None when it or a tier it needs is not installed."""
     from svbrdf_cli.auto_tier import load_rule
@@ -96,12 +126,17 @@ def auto_rule():
         return None
 
 
-def available(threads=0):
-    """Runnable methods, cheapest kind first: floor, the physical estimate, the end-to-end baseline,
-    every installed tier, auto."""
+def available(threads=0, refined=False):
+    """Runnable methods, cheapest kind first: floor, the physical estimate (and, with ``refined``, the
+    physical estimate with ``--refine``'s default steps: what ``svbrdf capture`` runs by default), the
+    end-to-end baseline, every installed tier, auto."""
     from svbrdf_cli.inference import MODELS_DIR, installed_tiers
 
     out = [Floor(), Physical()]
+    if refined:
+        from svbrdf_cli.refine import DEFAULT_ITERATIONS
+
+        out.append(Refined(Physical(), DEFAULT_ITERATIONS))
     e2e = os.path.join(BASELINES_DIR, "e2e-fast")
     if os.path.isfile(os.path.join(e2e, "maps.onnx")):
         out.append(Network("e2e", e2e, "end-to-end UNet (input -> maps, fast-tier parameters)", threads))

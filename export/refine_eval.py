@@ -52,27 +52,9 @@ def held_out_relight(pred_linear, gt_linear):
 
 
 def refined(method, iterations, timings=None):
-    """``method`` followed by :func:`svbrdf_cli.refine.refine` under the photo's estimated geometry."""
-    if not iterations:
-        return method
-
-    def run(image):
-        stored = method(image)
-        geo = geometry.estimate(image, height=_flash_height(method, image))
-        t0 = time.perf_counter()
-        res = refine.refine(image, stored, geo, iterations)
-        if timings is not None:
-            timings.append(time.perf_counter() - t0)
-        return res.stored
-
-    return run
-
-
-def _flash_height(method, image):
-    from svbrdf_cli.physical import estimate
-
-    found = getattr(getattr(method, "chain", None), "found", None) or estimate(image)[1]
-    return found["flash_height"]
+    """``method`` followed by :func:`svbrdf_cli.refine.refine` under the photo's estimated geometry
+    (:class:`export.methods.Refined`); ``method`` itself when ``iterations`` is 0."""
+    return method_zoo.Refined(method, iterations, timings) if iterations else method
 
 
 def des19(method, samples, des19_dir, out):

@@ -115,6 +115,27 @@ def _change(a, b):
     return {k: float(np.sqrt(((a[k] - b[k]) ** 2).mean())) for k in MAPS}
 
 
+#: A map whose spatial contrast (:func:`_contrast`) is under this is constant: perfectly stable and
+#: carrying nothing, so its change is not divided by it.
+CONSTANT = 1e-3
+
+
+def _contrast(maps):
+    """Each map's own spatial contrast: the RMS of its deviation from its mean over the image (per channel)."""
+    return {k: float(np.sqrt(((maps[k] - maps[k].reshape(-1, maps[k].shape[-1]).mean(0)) ** 2).mean())) for k in MAPS}
+
+
+def relative_change(changes, contrasts):
+    """Per map: the mean over samples of change / the clean map's contrast, over the samples whose clean map
+    is not constant, and how many were (None where every one was: a constant map moves by nothing)."""
+    out = {}
+    for k in MAPS:
+        ratios = [c[k] / r[k] for c, r in zip(changes, contrasts) if r[k] >= CONSTANT]
+        out[k] = {"ratio": float(np.mean(ratios)) if ratios else None,
+                  "constant": sum(r[k] < CONSTANT for r in contrasts)}
+    return out
+
+
 def _finite(maps):
     return all(np.isfinite(v).all() for v in maps.values())
 
@@ -176,6 +197,7 @@ def run(chain, des19_samples, des19_dir, real, gallery=None, log=print, seed=0):
     rows = {}
     for label, (geom, photometric, variant) in PERTURBATIONS.items():
         changes = {"des19": [], "real": []}
+        contrasts = []
         folder = os.path.join(work, label.replace(" ", "_").replace("/", "_"))
         sets = [("des19", n, lin, gt) for n, lin, gt in des19] \
             + ([] if variant else [("real", n, lin, None) for n, lin in real])
@@ -189,12 +211,14 @@ def run(chain, des19_samples, des19_dir, real, gallery=None, log=print, seed=0):
                 continue
             ch = _change(maps, ref)
             changes[kind].append(ch)
+            contrasts.append(_contrast(ref))
             examples.append((float(np.mean(list(ch.values()))), label, n, src, ref, maps))
             if kind == "des19":
                 write_map_set(os.path.join(folder, n), stored_to_linear(maps))
         row = {"samples": {k: len(v) for k, v in changes.items()},
                "change": {k: float(np.mean([c[k] for c in changes["des19"] + changes["real"]])) for k in MAPS}
                if changes["des19"] or changes["real"] else None,
+               "relative": relative_change(changes["des19"] + changes["real"], contrasts) if contrasts else None,
                "reference": "clean_rendered" if variant else "clean"}
         if changes["des19"]:
             row["des19"] = score(des19_dir, folder)[0]
@@ -230,21 +254,36 @@ def gallery_figure(examples, path, tile=160):
     write_image(path, np.concatenate(rows, 0).astype(np.float32) / 255)
 
 
+def _relative_cell(rel):
+    """``0.12×`` (change over the map's own contrast), ``constant`` where every clean map was."""
+    if rel is None:
+        return "–"
+    if rel["ratio"] is None:
+        return "constant"
+    return f"{rel['ratio']:.2f}×" + (f" ({rel['constant']} const.)" if rel["constant"] else "")
+
+
 def table(res):
     head = ("| perturbation | photos (Des19 + real) | change: normal | diffuse | roughness | specular | "
-            "Des19 error: normal | diffuse | roughness | specular |\n|---|---|---|---|---|---|---|---|---|---|\n")
+            "change / contrast: normal | diffuse | roughness | specular | "
+            "Des19 error: normal | diffuse | roughness | specular |\n|" + "---|" * 14 + "\n")
     lines = []
     for ref in ("clean", "clean_rendered"):
         s = res["clean"][ref]
-        lines.append(f"| *{'clean' if ref == 'clean' else 'clean, our centred-flash render'}* | | | | | | "
+        lines.append(f"| *{'clean' if ref == 'clean' else 'clean, our centred-flash render'}* | | | | | | | | | | "
                      + " | ".join(f"{s.get(k, float('nan')):.4f}" for k in MAPS) + " |")
     for label, r in res["rows"].items():
         ch = r["change"] or {}
+        rel = r.get("relative") or {}
         d = r.get("des19", {})
         n = r["samples"]
         lines.append(f"| {label} | {n['des19']} + {n['real']} | " + " | ".join(f"{ch[k]:.4f}" if k in ch else "–" for k in MAPS)
+                     + " | " + " | ".join(_relative_cell(rel.get(k)) for k in MAPS)
                      + " | " + " | ".join(f"{d[k]:.4f}" if k in d else "–" for k in MAPS) + " |")
     fails = res["failures"]
-    tail = f"\nFailures (exceptions or non-finite maps): {len(fails)}" + (
+    tail = ("\n*change / contrast*: each map's RMS change divided by that map's own spatial contrast in the clean run "
+            "(RMS deviation from its mean), averaged over the photos; a constant map (contrast under "
+            f"{CONSTANT:g}) moves by nothing and carries nothing, so it is counted apart (`constant`).\n")
+    tail += f"\nFailures (exceptions or non-finite maps): {len(fails)}" + (
         ":\n" + "\n".join(f"- {f['perturbation']} on {f['sample']}: {f['error']}" for f in fails) if fails else ".")
     return head + "\n".join(lines) + "\n" + tail + "\n"

@@ -64,3 +64,17 @@ def test_benchmark_runs_on_two_samples(shared_data, tmp_path):
     assert again["ladder"] == res["auto"]["rule"]["ladder"] and "8 photos" in again["calibration"]["data"]
     for f in ("speed_vs_accuracy.md", "stability.md", "confidence.md", "auto.md", "benchmark.json"):
         assert (tmp_path / "tab" / f).is_file()
+
+
+def test_stability_change_is_relative_to_each_maps_own_contrast():
+    flat = {k: np.full((8, 8, 3), 0.5, np.float32) for k in stability.MAPS}
+    textured = {k: v.copy() for k, v in flat.items()}
+    textured["diffuse"][::2] = 0.7  # contrast (RMS deviation from the mean) 0.2
+    textured["diffuse"][1::2] = 0.3
+    moved = {k: v.copy() for k, v in textured.items()}
+    moved["diffuse"] += 0.01
+    rel = stability.relative_change([stability._change(moved, textured)], [stability._contrast(textured)])
+    assert rel["diffuse"]["ratio"] == pytest.approx(0.05, rel=1e-3)
+    assert rel["normal"] == {"ratio": None, "constant": 1}  # constant: no ratio, counted apart
+    assert stability._relative_cell(rel["normal"]) == "constant"
+    assert stability._relative_cell(rel["diffuse"]) == "0.05×"
