@@ -162,7 +162,7 @@ def _ratios(model, threads, repeat, dng=None):
             one = _spawn({"photo": os.path.join(src, "p000.jpg"), "size": side, "upsample": "guided", "model": model,
                           "threads": threads, "repeat": repeat})
             cmd = [sys.executable, "-m", "svbrdf_cli.cli.main", "batch", src, "-o", os.path.join(tmp, f"out{side}"),
-                   "--model", model, "--size", str(side), "--threads", str(threads), "-q"]
+                   "--model", model, "--size", str(side), "--threads", str(threads), "--refine", "0", "-q"]  # as _one
             peak = ("import resource, subprocess, sys; r = subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL); "
                     "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss); sys.exit(r.returncode)")
             t0 = time.perf_counter()
