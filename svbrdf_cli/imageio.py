@@ -78,18 +78,24 @@ def read_image(path):
 
 def write_images(jobs, workers=2):
     """Write several images at once, ``jobs`` a list of ``write_image`` argument tuples (path, pixels,
-    bits, colour), on ``workers`` threads (OpenImageIO encodes without holding the GIL). Every job is
-    finished before the first failure, if any, is raised."""
+    bits, colour), on ``workers`` threads (the encoders hold the GIL little). ``pixels`` may be a
+    function of no arguments that makes them (a preview), called on the worker thread, so that it is
+    made while other images are encoded: put such jobs first. Every job is finished before the first
+    failure, if any, is raised."""
     import concurrent.futures
 
     if len(jobs) < 2 or workers < 2:
         for job in jobs:
-            write_image(*job)
+            _write_job(*job)
         return
     with concurrent.futures.ThreadPoolExecutor(max_workers=workers) as pool:
-        futures = [pool.submit(write_image, *job) for job in jobs]
+        futures = [pool.submit(_write_job, *job) for job in jobs]
     for f in futures:
         f.result()
+
+
+def _write_job(path, pixels, *args):
+    write_image(path, pixels() if callable(pixels) else pixels, *args)
 
 
 def write_image(path, pixels, bits=8, colour=True):

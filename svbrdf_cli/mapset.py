@@ -96,4 +96,4 @@ def write_stored_set(folder, stored, bits=8, images=()):
         if name == "roughness":
             img = np.repeat(img[..., :1], 3, axis=-1)
         jobs.append((os.path.join(folder, name + ".png"), img, bits, name in ("diffuse", "specular")))
-    write_images(jobs + list(images))
+    write_images(list(images) + jobs)  # the caller's first: a preview made while the maps are encoded

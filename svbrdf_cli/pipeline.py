@@ -440,8 +440,8 @@ def _write_set(path, folder, opts, record, timings, stored, maps, net_in, out, c
 
     t2 = time.perf_counter()
     record["input"]["sha256"] = file_sha256(path)
-    # the preview is encoded on the same threads as the maps (write_preset's images)
-    images = [("preview.png", preview_image(net_in, stored), 8, True)] if opts.preview else []
+    # the preview is made and encoded on the same threads as the maps (write_preset's images)
+    images = [("preview.png", functools.partial(preview_image, net_in, stored), 8, True)] if opts.preview else []
 
     def extra(tmp):
         names = []

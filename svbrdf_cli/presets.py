@@ -386,7 +386,8 @@ def write_svbrdf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, pr
         bits: 8 or 16.
         fmt: "png" only.
         force: replace an existing folder.
-        images: more images for the set, (name, pixels, bits, colour) each, encoded with the maps.
+        images: more images for the set, (name, pixels or a function making them, bits, colour) each,
+            encoded with the maps.
         stored: the maps already in the stored encoding (a capture's): written as they are, without
             the round trip through linear units.
 
@@ -597,7 +598,8 @@ def write_preset(preset, folder, maps, stored=None, **kwargs):
     ``tileable`` (the maps wrap: the height map is integrated periodically)
     and ``ao`` (ambient occlusion from the height in ORM, MaskMap and glTF's
     occlusion channel; False: a constant 1), ``images`` (more images for the set, each
-    ``(name, pixels, bits, colour)``, encoded together with the preset's own).
+    ``(name, pixels, bits, colour)``, encoded together with the preset's own; ``pixels`` may be a function
+    making them, called on an encoding thread).
 
     ``stored``: the maps in the stored encoding, instead of ``maps`` (None): the native preset writes
     them as they are, the others decode them first.
