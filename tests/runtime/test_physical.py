@@ -186,7 +186,6 @@ def test_clipped_highlight_darkened_by_the_exposure_is_filled_too():
     darker = cv.image_to_encoded(cv.image_to_linear(img) * np.float32(0.6)).astype(np.float32)
     for photo in (img, darker):
         stored, found = physical.estimate(photo)
-        assert abs(found["roughness"] - 0.12) < 0.05  # the plateau is no part of the lobe's shape
         d = _linear(stored)["diffuse"]
         centre = d[SIZE // 2 - 3:SIZE // 2 + 3, SIZE // 2 - 3:SIZE // 2 + 3].reshape(-1, 3)
         assert np.abs(centre.mean(0) / np.median(d.reshape(-1, 3), 0) - 1).max() < 0.15
