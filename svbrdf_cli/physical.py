@@ -314,12 +314,48 @@ def flatten_radial(diffuse, rho, rings=PROFILE_RINGS // 2, weights=None):
     return (diffuse * np.exp(-trend)[..., None]).astype(np.float32)
 
 
+def push_pull(values, weights, confident=1.0, until_covered=False, fallback=0.0):
+    """Weighted push-pull of ``values`` (H, W) or (H, W, C) by ``weights`` (H, W) in [0, 1].
+
+    Weighted averages on a pyramid of halvings (INTER_AREA), then back up: each level keeps its own
+    weighted average in proportion to its weight (fully from ``confident``) and takes the coarser
+    level's elsewhere. A pixel with weight keeps its local average; one without takes the nearest
+    weighted region's, smoothly. ``until_covered`` stops the halving once every pixel of a level
+    has some weight (a fill); otherwise it goes down to one pixel (a spread). ``fallback``: the
+    value where even the coarsest level has no weight.
+    """
+    import cv2
+
+    channels = values.ndim == 3
+
+    def per_pixel(d):
+        return d[..., None] if channels else d
+
+    num = np.ascontiguousarray(values * per_pixel(weights), np.float32)
+    den = np.ascontiguousarray(weights, np.float32)
+    pyramid = [(num, den)]
+    while min(den.shape) > (2 if until_covered else 1) and (not until_covered or float(den.min()) <= 0.0):
+        h, w = den.shape
+        size = (max(1, w // 2), max(1, h // 2))
+        num = cv2.resize(num, size, interpolation=cv2.INTER_AREA).reshape(size[1], size[0], *values.shape[2:])
+        den = cv2.resize(den, size, interpolation=cv2.INTER_AREA)
+        pyramid.append((num, den))
+    num, den = pyramid[-1]
+    out = np.where(per_pixel(den) > 0, num / np.maximum(per_pixel(den), 1e-12), fallback)
+    for num, den in reversed(pyramid[:-1]):
+        h, w = den.shape
+        up = cv2.resize(np.ascontiguousarray(out, np.float32), (w, h), interpolation=cv2.INTER_LINEAR).reshape(num.shape)
+        c = np.clip(den / confident, 0.0, 1.0)
+        own = np.divide(c, den, out=np.zeros_like(den), where=den > 0)  # 1 where fully confident
+        out = num * per_pixel(own) + per_pixel(1.0 - c) * up  # c x its own average + (1 - c) x the coarser
+    return out
+
+
 def fill_from_surroundings(x, mask, detail=None):
-    """``x`` (H, W, C) with the pixels of ``mask`` replaced from their surroundings by push-pull: masked
-    averages on a pyramid of halvings until nothing is missing, then back up, each level keeping its
-    own average where it had valid pixels (in proportion to them) and the coarser one elsewhere. A
-    smooth fill, without the radial streaks of boundary-marching inpainting; ``detail`` (H, W), when
-    given, multiplies the fill: the photo's own relative texture where it still has one."""
+    """``x`` (H, W, C) with the pixels of ``mask`` replaced from their surroundings by push-pull
+    (:func:`push_pull` of the unmasked pixels): a smooth fill, without the radial streaks of
+    boundary-marching inpainting; ``detail`` (H, W), when given, multiplies the fill: the photo's
+    own relative texture where it still has one."""
     import cv2
 
     if not mask.any():
@@ -329,52 +365,21 @@ def fill_from_surroundings(x, mask, detail=None):
     if not keep.any():
         return x
     x = np.asarray(x, np.float32)
-    num, den = x * keep[..., None], keep
-    pyramid = [(num, den)]
-    while min(den.shape) > 2 and float(den.min()) <= 0.0:
-        h, w = den.shape
-        size = (max(1, w // 2), max(1, h // 2))
-        num = cv2.resize(num, size, interpolation=cv2.INTER_AREA).reshape(size[1], size[0], -1)
-        den = cv2.resize(den, size, interpolation=cv2.INTER_AREA)
-        pyramid.append((num, den))
-    num, den = pyramid[-1]
-    fill = np.where(den[..., None] > 0, num / np.maximum(den, 1e-12)[..., None], x[~m].mean(0))
-    for num, den in reversed(pyramid[:-1]):
-        h, w = den.shape
-        up = cv2.resize(fill, (w, h), interpolation=cv2.INTER_LINEAR).reshape(h, w, -1)
-        fill = num + (1.0 - den)[..., None] * up  # den * (its own average) + (1 - den) * the coarser
+    fill = push_pull(x, keep, until_covered=True, fallback=x[~m].mean(0))
     if detail is not None:
         fill = fill * detail[..., None]
     return np.where(m[..., None], fill, x).astype(np.float32)
 
 
+def _channel_min_max(x):
+    """Weakest and strongest channel of (H, W, 3) ``x`` (faster than ``.min(-1)`` / ``.max(-1)``)."""
+    return (np.minimum(np.minimum(x[..., 0], x[..., 1]), x[..., 2]),
+            np.maximum(np.maximum(x[..., 0], x[..., 1]), x[..., 2]))
+
+
 def _hue(x):
     """Hue angle (radians) of RGB ``x``: unchanged by adding white."""
     return np.arctan2(np.sqrt(3.0) * (x[..., 1] - x[..., 2]), 2.0 * x[..., 0] - x[..., 1] - x[..., 2])
-
-
-def _spread(values, weights, confident=0.05):
-    """Weighted push-pull of ``values`` (H, W) by ``weights`` (H, W): where the weights are high a
-    pixel keeps its own weighted local average, elsewhere it takes the nearest well-weighted region's
-    (halvings until every pixel is reached, then back up). Returns (H, W)."""
-    import cv2
-
-    num, den = np.ascontiguousarray(values * weights, np.float32), np.ascontiguousarray(weights, np.float32)
-    pyramid = [(num, den)]
-    while min(den.shape) > 1:
-        h, w = den.shape
-        size = (max(1, w // 2), max(1, h // 2))
-        num = cv2.resize(num, size, interpolation=cv2.INTER_AREA)
-        den = cv2.resize(den, size, interpolation=cv2.INTER_AREA)
-        pyramid.append((num, den))
-    num, den = pyramid[-1]
-    out = num / np.maximum(den, 1e-12)
-    for num, den in reversed(pyramid[:-1]):
-        h, w = den.shape
-        up = cv2.resize(out, (w, h), interpolation=cv2.INTER_LINEAR).reshape(h, w)
-        c = np.clip(den / confident, 0.0, 1.0)
-        out = c * num / np.maximum(den, 1e-12) + (1.0 - c) * up
-    return out
 
 
 def separate_by_colour(lin, share, tint, unreliable, reference=None):
@@ -409,14 +414,11 @@ def separate_by_colour(lin, share, tint, unreliable, reference=None):
     import cv2
 
     ln = np.asarray(lin, np.float32) / tint
-    lo = np.minimum(np.minimum(ln[..., 0], ln[..., 1]), ln[..., 2])  # (faster than .min(-1))
-    hi = np.maximum(np.maximum(ln[..., 0], ln[..., 1]), ln[..., 2])
+    lo, hi = _channel_min_max(ln)
     spread = hi - lo
     whiteness = lo / np.maximum(hi, 1e-6)
     if reference is not None:
-        rf = np.asarray(reference, np.float32) / tint
-        rlo = np.minimum(np.minimum(rf[..., 0], rf[..., 1]), rf[..., 2])
-        rhi = np.maximum(np.maximum(rf[..., 0], rf[..., 1]), rf[..., 2])
+        rlo, rhi = _channel_min_max(np.asarray(reference, np.float32) / tint)
         read = np.clip(rlo / np.maximum(rhi, 1e-6), 0.0, 1.0)
     else:
         read = whiteness
@@ -451,7 +453,7 @@ def separate_by_colour(lin, share, tint, unreliable, reference=None):
         wt = m * trust_px
         if float(wt.mean()) < WHITENESS_MIN_SHARE:
             continue
-        w += m * up(_spread(down(read * wt) / np.maximum(down(wt), 1e-12), down(wt)))
+        w += m * up(push_pull(down(read * wt) / np.maximum(down(wt), 1e-12), down(wt), confident=0.05))
         seen += m
     w = np.where(seen > 1e-6, w / np.maximum(seen, 1e-6), 1.0)
     seen = np.clip(seen / np.maximum(total, 1e-6), 0.0, 1.0)
@@ -557,7 +559,7 @@ def estimate(image, geo=None, normal_strength=None, with_fit=False, metals=None)
     if COLOUR_SEPARATION and not fit.metal and fit.specular > 0:
         # where the diffuse has a colour, the highlight is read per pixel from it (glossy tiles lose
         # theirs, the matte grout keeps its own); the lobe's smooth share elsewhere
-        near = np.maximum(np.maximum(img[..., 0], img[..., 1]), img[..., 2]) >= NEAR_CLIPPED * level
+        near = _channel_min_max(img)[1] >= NEAR_CLIPPED * level
         by_colour, coloured = separate_by_colour(lin, share[..., 0], tint, near, reference=base)
         # only where the colour says there is a highlight (a ramp, so no edge shows), near the flash
         taken = 1.0 - _luma(by_colour) / np.maximum(lum, 1e-6)
