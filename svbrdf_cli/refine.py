@@ -21,7 +21,9 @@ diffuse alone could copy the photo exactly, so the priors decide how the residua
   explained by a smooth lobe, not by painting its disc into the maps;
 * **a dielectric prior**: specular is pulled towards :data:`svbrdf_cli.conventions.DIELECTRIC_F0`,
   and its change is grey plus at most the diffuse's own colour (:func:`_spec_change`: a metal looks
-  its colour; no other tint is added to explain a white highlight over a coloured diffuse);
+  its colour; no other tint is added to explain a white highlight over a coloured diffuse), and
+  the map's mean luminance never goes under that dielectric F0 (:data:`SPECULAR_FLOOR`): the photo
+  may shape it from pixel to pixel but not lower the whole map;
 * **normals near the up direction** unless the photo needs them tilted.
 
 **Schedule.** Coarse to fine (:data:`LEVELS`): the changes are first found on a small image,
@@ -85,6 +87,20 @@ STEP = {"tilt": 0.02, "diffuse": 0.03, "roughness": 0.02, "specular": 0.005}
 #: Ranges the parameters are projected into after each step.
 ROUGHNESS_RANGE = (0.03, 1.0)
 SPECULAR_RANGE = (0.0, 1.0)
+#: The refined F0's mean luminance never goes under a common dielectric's (grey is added to every
+#: pixel, so its spatial variation and tint stay). Almost every surface reflects at least that much
+#: (water, 0.02, is the rare exception); a fit that lowers the whole map is explaining something else
+#: (the global intensity fitted at the start, a highlight spread by relief the flat start lacks),
+#: while its variation from pixel to pixel is the photo's evidence. Measured (``python -m
+#: export.refine_eval --methods physical --repeat 0``; physical estimate without refinement: Des19
+#: specular 0.0587, card relight 0.1459):
+#:
+#: * no floor: the fit lowered F0 on 27 of 29 Des19 samples (means 0.031-0.038, the lowest on metals
+#:   whose true F0 is 0.09): Des19 specular 0.0615 (+4.8 %), card 0.1294;
+#: * a floor on every pixel's F0: Des19 specular 0.0585, card 0.1392 (the card's foil scales do
+#:   reflect less than 0.04 in places: MaterialGAN's reference maps say so too);
+#: * this floor on the mean: Des19 specular 0.0591 (+0.7 %), card 0.1316 (-9.8 %).
+SPECULAR_FLOOR = cv.DIELECTRIC_F0
 TILT_LIMIT = 3.0  # 72 degrees
 
 
@@ -249,6 +265,10 @@ def _project(p):
     p["diffuse"] = np.clip(p["diffuse"], np.log(1e-4), 0.0)
     p["roughness"] = np.clip(p["roughness"], *ROUGHNESS_RANGE)
     p["specular"] = np.clip(p["specular"], *SPECULAR_RANGE)
+    if SPECULAR_FLOOR:  # grey added to every pixel when the map's mean luminance is under the floor
+        short = SPECULAR_FLOOR - float((p["specular"] @ np.asarray(cv.LUMA, np.float32)).mean())
+        if short > 0:
+            p["specular"] = np.clip(p["specular"] + np.float32(short), *SPECULAR_RANGE)
 
 
 def fit_intensity(photo_lin, params, geometry):

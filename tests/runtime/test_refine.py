@@ -198,3 +198,33 @@ def test_specular_changes_only_grey_or_in_the_diffuse_colour():
     assert np.ptp(out) < 1e-6 and abs(float(out.mean())) < 1e-6
     flat = refine._spec_change(blue, np.ones((1, 1, 3), np.float32))  # grey diffuse: grey changes only
     assert np.ptp(flat) < 1e-6
+
+
+def test_the_specular_maps_mean_never_falls_under_a_dielectrics_f0(monkeypatch):
+    # a photo whose highlight is weaker than the start's F0 = 0.04 explains: the fit lowers F0
+    light = (0.1, 0.0, 2.4)
+    photo, truth = _photo(light, camera=light, roughness=0.15, seed=5, specular=0.0)
+    start = _stored(dict(truth, specular=np.full_like(truth["specular"], cv.DIELECTRIC_F0)))
+    geo = geometry.CaptureGeometry(camera=light, light=light, highlight=light[:2])
+
+    def mean_f0(stored):
+        return float((cv.decode_maps(stored)["specular"] @ np.asarray(cv.LUMA, np.float32)).mean())
+
+    monkeypatch.setattr(refine, "SPECULAR_FLOOR", 0.0)
+    assert mean_f0(refine.refine(photo, start, geo, 100).stored) < cv.DIELECTRIC_F0 - 8e-4  # without the floor
+    monkeypatch.setattr(refine, "SPECULAR_FLOOR", cv.DIELECTRIC_F0)
+    res = refine.refine(photo, start, geo, 100)
+    assert mean_f0(res.stored) >= cv.DIELECTRIC_F0 - 1e-4 and not res.report["kept_start"]
+
+
+def test_the_floor_lifts_the_whole_map_and_keeps_its_variation():
+    spec = np.zeros((4, 4, 3), np.float32)
+    spec[:2] = [0.01, 0.02, 0.03]  # a tinted half and a black half: mean luminance 0.01
+    p = {"tilt": np.zeros((4, 4, 2), np.float32), "diffuse": np.full((4, 4, 3), -1.0, np.float32),
+         "roughness": np.full((4, 4, 1), 0.5, np.float32), "specular": spec.copy()}
+    refine._project(p)
+    assert float((p["specular"] @ np.asarray(cv.LUMA, np.float32)).mean()) == pytest.approx(cv.DIELECTRIC_F0, abs=1e-6)
+    assert np.allclose(p["specular"] - spec, p["specular"][3, 3, 0] - spec[3, 3, 0], atol=1e-6)  # the same grey everywhere
+    high = dict(p, specular=np.full((4, 4, 3), 0.5, np.float32))
+    refine._project(high)
+    assert np.allclose(high["specular"], 0.5)  # a map above the floor is left alone
