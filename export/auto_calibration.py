@@ -134,6 +134,19 @@ def choose_step(err_lo, err_hi, cost_lo, cost_hi, values, signal_cost, margin=MA
     return min(ok, key=_cheapest), ok
 
 
+def _correlation(a, b):
+    """Pearson correlation of two per-photo series; None where one is constant (the physical estimate's
+    F0 is the same 0.04 on every photo: its specular signal says nothing)."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    if a.std() == 0 or b.std() == 0:
+        return None
+    return float(np.corrcoef(a, b)[0, 1])
+
+
+def _r2(value):
+    return "–" if value is None else f"{value:.2f}"
+
+
 def _cheapest(candidate):
     """Order of preference among rules within the tolerance: cost, then error."""
     return round(candidate["seconds"], 6), candidate["error"]
@@ -141,7 +154,10 @@ def _cheapest(candidate):
 
 def calibrate(samples, chains=None, margin=MARGIN, repeat=5, log=print):
     """The rule for the installed tiers (cheapest first), from ``samples`` (see :func:`generated`)."""
-    chains = chains or {t: Chain(os.path.join(MODELS_DIR, t)) for t in installed_tiers()}
+    if chains is None:
+        from svbrdf_cli.physical import PhysicalModel
+
+        chains = {auto_tier.PHYSICAL: PhysicalModel(), **{t: Chain(os.path.join(MODELS_DIR, t)) for t in installed_tiers()}}
     ladder = list(chains)
     if len(ladder) < 2:
         raise SvbrdfError(f"--model auto needs two installed tiers; found {', '.join(ladder) or 'none'}")
@@ -154,7 +170,7 @@ def calibrate(samples, chains=None, margin=MARGIN, repeat=5, log=print):
                       if (cs := [c for c in within if c["signal"] == n and c["threshold"] is not None])}
         steps.append({k: chosen[k] for k in ("signal", "threshold", "above")})
         report.append({"from": lo, "to": hi, "chosen": chosen, "cheapest_per_signal": per_signal,
-                       "correlation": {n: float(np.corrcoef(values[lo][n], errors[hi] - errors[lo])[0, 1])
+                       "correlation": {n: _correlation(values[lo][n], errors[hi] - errors[lo])
                                        for n in auto_tier.SIGNALS}})
     rule = {"ladder": ladder, "steps": steps}
     levels = [auto_tier.decide(rule, [values[ladder[i]][s["signal"]][j] for i, s in enumerate(steps)])
@@ -235,7 +251,7 @@ def evidence(rule, des19, nine=None, real=(), chains=None, log=print):
             nxt = rule["ladder"][1]
             if len(items) > 2:
                 d = per_photo[nxt] - per_photo[cheap]
-                row["correlation"] = {n: float(np.corrcoef(v, d)[0, 1]) for n, v in signals.items()}
+                row["correlation"] = {n: _correlation(v, d) for n, v in signals.items()}
                 row["next_better_on"] = float((d < 0).mean())
         row["cost_vs_dearest"] = row["seconds"]["auto"] / row["seconds"][rule["ladder"][-1]]
         out[name] = row
@@ -266,7 +282,7 @@ def evidence_table(ev, ladder):
                   "| set | better tier per photo | " + f"{ladder[1]} better on | "
                   + " | ".join(f"corr({n})" for n in names) + " |", "|---|---|---|" + "---|" * len(names)]
         lines += [f"| {n} | {r['better_of_tiers']:.4f} | {100 * r['next_better_on']:.0f} % | "
-                  + " | ".join(f"{r['correlation'][k]:.2f}" for k in names) + " |" for n, r in diag]
+                  + " | ".join(_r2(r["correlation"][k]) for k in names) + " |" for n, r in diag]
     return head + "\n".join(lines) + "\n"
 
 
@@ -279,7 +295,7 @@ def calibration_table(rule):
         for n in auto_tier.SIGNALS:
             c = st["cheapest_per_signal"].get(n)
             lines.append(f"| {st['from']} → {st['to']} | {n} | {cal['signal_seconds_256'][n]:.4f} | "
-                         f"{st['correlation'][n]:.2f} | " + ("none within tolerance | – | – | –" if c is None else
+                         f"{_r2(st['correlation'][n])} | " + ("none within tolerance | – | – | –" if c is None else
                          f"{'>' if c['above'] else '<'} {c['threshold']:.4f} | {c['error']:.4f} | {c['seconds']:.3f} | {100 * c['stepped_up']:.0f} %")
                          + " |")
         ch = st["chosen"]

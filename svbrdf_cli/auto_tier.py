@@ -1,5 +1,8 @@
 """``--model auto``: per photo, the cheapest installed tier that is good enough for the scene.
 
+The ladder starts with the physical estimate (``physical``, :mod:`svbrdf_cli.physical`: the default
+model, computed rather than learnt, and the cheapest), then the installed networks.
+
 The rule lives in ``models/auto.json`` (written by ``python -m export.auto_calibration``,
 with the numbers it was chosen on). It is a *ladder* of tiers, cheapest first,
 and for each step up a *signal*, a *threshold* and a side (``above``: true or
@@ -29,6 +32,13 @@ from svbrdf_cli.inference import MODELS_DIR, Chain, ModelError, installed_tiers
 
 #: Where the calibrated rule is shipped.
 RULE_FILE = os.path.join(MODELS_DIR, "auto.json")
+#: The ladder's first rung: the physical estimate, which needs no model file.
+PHYSICAL = "physical"
+
+
+def available_tiers():
+    """What a ladder may step through, cheapest first: the physical estimate, then the installed networks."""
+    return [PHYSICAL] + installed_tiers()
 
 
 def _contrast(image, maps, chain):
@@ -72,7 +82,7 @@ def load_rule(path=RULE_FILE):
                          f"tier ({', '.join(installed_tiers()) or 'none installed'}).")
     with open(path) as f:
         rule = json.load(f)
-    missing = [t for t in rule["ladder"] if t not in installed_tiers()]
+    missing = [t for t in rule["ladder"] if t not in available_tiers()]
     if missing:
         raise ModelError(f"--model auto steps between {', '.join(rule['ladder'])}, but {', '.join(missing)} "
                          f"is not installed; pick --model {installed_tiers()[0] if installed_tiers() else 'FOLDER'}.")
@@ -114,7 +124,12 @@ class AutoModel:
 
     def chain(self, tier):
         if tier not in self._chains:
-            self._chains[tier] = Chain(os.path.join(MODELS_DIR, tier), threads=self.threads)
+            if tier == PHYSICAL:
+                from svbrdf_cli.physical import PhysicalModel
+
+                self._chains[tier] = PhysicalModel()
+            else:
+                self._chains[tier] = Chain(os.path.join(MODELS_DIR, tier), threads=self.threads)
         return self._chains[tier]
 
     @property

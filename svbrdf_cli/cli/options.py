@@ -74,8 +74,8 @@ _CAPTURE_OPTIONS = [
                  help="Folder for the texture sets: one sub-folder per photo, named after it."),
     click.option("--model", default=DEFAULT_MODEL, show_default=True,
                  help="'physical' (the maps computed from the flash physics: today's most accurate), a network "
-                      "tier (lite, fast, balanced, best), 'auto' (per photo, the cheapest tier good enough for "
-                      "it) or a folder of exported models."),
+                      "tier (lite, fast, balanced, best), 'auto' (per photo, the cheapest of physical and the "
+                      "installed tiers that is good enough for it) or a folder of exported models."),
     click.option("--preset", type=click.Choice(list(PRESETS)), default="svbrdf", show_default=True,
                  help="Texture-set layout (see 'svbrdf export --help')."),
     click.option("--crop", type=click.Choice(CROP_MODES), default=CROP_MODES[0], show_default=True,

@@ -97,6 +97,30 @@ def test_capture_with_model_auto_records_the_tier_and_why(tmp_path):
     rec = json.loads((tmp_path / "out" / "stone" / "material.json").read_text())
     m = rec["model"]
     assert m["name"] == "auto" and m["tier"] == m["auto"]["chosen"] and m["tier"] in auto_tier.load_rule()["ladder"]
-    assert m["sha256_16"]["maps.onnx"] and os.path.isdir(m["folder"])
+    if m["tier"] == auto_tier.PHYSICAL:  # the estimate: no model file, what it found instead
+        assert m["method"].startswith("physical estimate") and "flash_foot" in m["found"]
+    else:
+        assert m["sha256_16"]["maps.onnx"] and os.path.isdir(m["folder"])
     assert any(k.startswith("network_") for k in rec["timings_s"])
     assert os.path.isfile(tmp_path / "out" / "stone" / "confidence" / "normal.png")
+
+
+@pytest.mark.parametrize("threshold,chosen", [(None, 0), (-1.0, 1)])
+def test_the_ladder_starts_with_the_physical_estimate(threshold, chosen, tmp_path):
+    from svbrdf_cli.physical import PhysicalModel
+
+    if not installed_tiers():
+        pytest.skip("no network tier installed to step up to")
+    rule = {"ladder": [auto_tier.PHYSICAL, installed_tiers()[0]],
+            "steps": [{"signal": "contrast", "threshold": threshold, "above": True}]}
+    p = tmp_path / "auto.json"
+    p.write_text(json.dumps(rule))
+    assert auto_tier.load_rule(str(p))["ladder"][0] == "physical"  # needs no model file
+    auto = auto_tier.AutoModel(rule, threads=1)
+    img = _photo(3)
+    out = auto(img)
+    ref = (PhysicalModel() if chosen == 0 else auto.chain(rule["ladder"][1]))(img)
+    assert auto.decision["chosen"] == rule["ladder"][chosen]
+    for k in cv.MAP_NAMES:
+        np.testing.assert_array_equal(out[k], ref[k])
+    assert auto.describe()["tier"] == rule["ladder"][chosen]

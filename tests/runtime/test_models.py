@@ -63,10 +63,12 @@ def test_provenance_matches_the_files(tier):
 
 
 def test_the_auto_rule_is_shipped_calibrated_for_the_installed_tiers():
-    from svbrdf_cli.auto_tier import SIGNALS, load_rule
+    from svbrdf_cli.auto_tier import SIGNALS, available_tiers, load_rule
 
     rule = load_rule()  # raises when a tier it steps between is missing
-    assert len(rule["ladder"]) >= 2 and rule["ladder"] == [t for t in installed_tiers() if t in rule["ladder"]]
+    # the physical estimate first, then the networks, cheapest first
+    assert len(rule["ladder"]) >= 2 and rule["ladder"] == [t for t in available_tiers() if t in rule["ladder"]]
+    assert rule["ladder"][0] == "physical"
     assert all(s["signal"] in SIGNALS for s in rule["steps"])
     cal = rule["calibration"]
     assert "seed" in cal["data"] and cal["margin"] > 0 and set(cal["tier_error"]) == set(rule["ladder"])
