@@ -104,6 +104,14 @@ SPECULAR_RANGE = (0.0, 1.0)
 #:   reflect less than 0.04 in places: MaterialGAN's reference maps say so too);
 #: * this floor on the mean: Des19 specular 0.0591 (+0.7 %), card 0.1316 (-9.8 %).
 SPECULAR_FLOOR = cv.DIELECTRIC_F0
+#: Roughness and F0 may change from pixel to pixel but not with the distance to the highlight: after
+#: each step their change loses its trend over :data:`RADIAL_RINGS` rings round the highlight's
+#: centre (:func:`_without_radial_trend`; the map's mean change is kept). A material has no reason to
+#: be rougher or duller where the flash happened to point; a fit that makes it so is explaining the
+#: highlight's shape (sharper than the start's lobe, its clipped core left out) and leaves a disc
+#: round the flash in both maps.
+NO_RADIAL_TREND = True
+RADIAL_RINGS = 16
 TILT_LIMIT = 3.0  # 72 degrees
 
 
@@ -247,6 +255,31 @@ def _spec_change(change, tint):
     return (a * one + b * tint).astype(np.float32)
 
 
+def _radial(side, centre, rings=RADIAL_RINGS):
+    """(distance of each pixel to ``centre`` (H, W), ring centres, ring of each pixel (flat)) at ``side``²."""
+    p = cv.surface_positions(side, side)
+    rho = np.hypot(p[..., 0] - centre[0], p[..., 1] - centre[1]).astype(np.float32)
+    edges = np.linspace(0.0, float(rho.max()) + 1e-6, rings + 1)
+    ring = np.clip(np.digitize(rho.ravel(), edges) - 1, 0, rings - 1)
+    return rho, 0.5 * (edges[:-1] + edges[1:]), ring
+
+
+def _without_radial_trend(change, radial):
+    """``change`` (H, W, C) less its ring means' departure from its mean, interpolated between ring
+    centres (so no ring edge shows): what is left varies from pixel to pixel, not with the distance."""
+    rho, centres, ring = radial
+    count = np.bincount(ring, minlength=len(centres)).astype(np.float64)
+    out = np.empty_like(change)
+    for c in range(change.shape[-1]):
+        v = change[..., c]
+        means = np.bincount(ring, weights=v.ravel().astype(np.float64), minlength=len(centres))
+        ok = count > 0
+        trend = means[ok] / count[ok] - float(v.mean())
+        t = np.interp(rho, centres[ok], trend).astype(np.float32)
+        out[..., c] = v - (t - float(t.mean()))  # (interpolated, the trend's own mean is not quite 0)
+    return out
+
+
 def _params(stored):
     """Stored maps -> optimisation parameters."""
     lin = cv.decode_maps(stored)
@@ -317,6 +350,7 @@ def refine(image, stored, geometry, iterations=DEFAULT_ITERATIONS, priors=None, 
         delta = {k: np.zeros_like(v) for k, v in init.items()} if delta is None else \
             {k: _resize(v, s) for k, v in delta.items()}
         tint = _tint(init["diffuse"])
+        radial = _radial(s, geometry.highlight[:2]) if NO_RADIAL_TREND else None
         m1 = {k: np.zeros_like(v) for k, v in delta.items()}
         m2 = {k: np.zeros_like(v) for k, v in delta.items()}
         for i in range(1, steps + 1):
@@ -333,6 +367,9 @@ def refine(image, stored, geometry, iterations=DEFAULT_ITERATIONS, priors=None, 
                 step = STEP[k] * (m1[k] / (1 - 0.9 ** i)) / (np.sqrt(m2[k] / (1 - 0.999 ** i)) + 1e-12)
                 delta[k] = (delta[k] - step).astype(np.float32)
             delta["specular"] = _spec_change(delta["specular"], tint)
+            if radial is not None:
+                for k in ("roughness", "specular"):
+                    delta[k] = _without_radial_trend(delta[k], radial)
             done += 1
             if progress:
                 progress(done)

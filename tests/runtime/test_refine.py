@@ -228,3 +228,35 @@ def test_the_floor_lifts_the_whole_map_and_keeps_its_variation():
     high = dict(p, specular=np.full((4, 4, 3), 0.5, np.float32))
     refine._project(high)
     assert np.allclose(high["specular"], 0.5)  # a map above the floor is left alone
+
+
+def test_the_radial_trend_is_taken_out_and_the_rest_kept():
+    side = 64
+    radial = refine._radial(side, (0.2, -0.1))
+    rho = radial[0]
+    disc = (0.1 * np.exp(-(rho / 0.4) ** 2))[..., None].astype(np.float32)  # darker, rougher where the flash was
+    p = cv.surface_positions(side, side)
+    stripes = (0.05 * np.sign(np.sin(p[..., 0] * 40.0)))[..., None].astype(np.float32)  # texture, not radial
+    out = refine._without_radial_trend(disc + stripes + 0.02, radial)
+    assert float(out.mean()) == pytest.approx(float((disc + stripes + 0.02).mean()), abs=1e-5)  # the level kept
+    centre, outside = rho < 0.2, rho > 1.0
+    assert abs(float(out[centre].mean() - out[outside].mean())) < 0.01  # the disc (0.09 deep) is gone
+    assert float(np.abs(out - disc.mean() - 0.02 - stripes).mean()) < 0.015  # the stripes are still there
+
+
+def test_refinement_leaves_no_disc_in_roughness_round_the_highlight(monkeypatch):
+    light = (0.1, 0.0, 2.4)
+    photo, truth = _photo(light, camera=light, roughness=0.2, seed=7)
+    start = _stored(dict(truth, roughness=np.full_like(truth["roughness"], 0.45)))  # the start's lobe too broad
+    geo = geometry.CaptureGeometry(camera=light, light=light, highlight=light[:2])
+    rho = refine._radial(256, light[:2])[0]
+
+    def disc(res):
+        change = cv.decode_maps(res.stored)["roughness"][..., 0] - 0.45
+        return abs(float(change[rho < 0.25].mean() - change[rho > 0.8].mean()))
+
+    monkeypatch.setattr(refine, "NO_RADIAL_TREND", False)
+    free = disc(refine.refine(photo, start, geo, 40))
+    monkeypatch.setattr(refine, "NO_RADIAL_TREND", True)
+    res = refine.refine(photo, start, geo, 40)
+    assert free > 0.01 and disc(res) < 0.3 * free and not res.report["kept_start"]
