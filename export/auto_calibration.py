@@ -39,7 +39,6 @@ from svbrdf_cli import auto_tier
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.capture_speed import median_seconds
 from svbrdf_cli.errors import SvbrdfError
-from svbrdf_cli.inference import MODELS_DIR, Chain, installed_tiers
 from svbrdf_cli.mapset import stored_to_linear
 
 #: The data engine's seed for calibration photos (training uses 0 and its per-stage streams, validation 1).
@@ -155,9 +154,9 @@ def _cheapest(candidate):
 def calibrate(samples, chains=None, margin=MARGIN, repeat=5, log=print):
     """The rule for the installed tiers (cheapest first), from ``samples`` (see :func:`generated`)."""
     if chains is None:
-        from svbrdf_cli.physical import PhysicalModel
+        from svbrdf_cli.models import load_model
 
-        chains = {auto_tier.PHYSICAL: PhysicalModel(), **{t: Chain(os.path.join(MODELS_DIR, t)) for t in installed_tiers()}}
+        chains = {t: load_model(t) for t in auto_tier.available_tiers()}
     ladder = list(chains)
     if len(ladder) < 2:
         raise SvbrdfError(f"--model auto needs two installed tiers; found {', '.join(ladder) or 'none'}")

@@ -28,16 +28,14 @@ import time
 import numpy as np
 
 from svbrdf_cli import conventions as cv
-from svbrdf_cli.inference import MODELS_DIR, Chain, ModelError, installed_tiers
+from svbrdf_cli.inference import MODELS_DIR, ModelError, installed_tiers
+from svbrdf_cli.models import PHYSICAL, load_model
 
 #: Where the calibrated rule is shipped.
 RULE_FILE = os.path.join(MODELS_DIR, "auto.json")
-#: The ladder's first rung: the physical estimate, which needs no model file.
-PHYSICAL = "physical"
-
-
 def available_tiers():
-    """What a ladder may step through, cheapest first: the physical estimate, then the installed networks."""
+    """What a ladder may step through, cheapest first: the physical estimate (:data:`svbrdf_cli.models.PHYSICAL`,
+    no model file), then the installed networks."""
     return [PHYSICAL] + installed_tiers()
 
 
@@ -124,12 +122,7 @@ class AutoModel:
 
     def chain(self, tier):
         if tier not in self._chains:
-            if tier == PHYSICAL:
-                from svbrdf_cli.physical import PhysicalModel
-
-                self._chains[tier] = PhysicalModel()
-            else:
-                self._chains[tier] = Chain(os.path.join(MODELS_DIR, tier), threads=self.threads)
+            self._chains[tier] = load_model(tier, threads=self.threads)
         return self._chains[tier]
 
     @property

@@ -93,7 +93,7 @@ SUBTRACT_FLOOR = 0.25
 #: distance, a ring-to-ring change is the material's own. Version 5 smoothed the ring means over three
 #: rings only, and a sign in the middle of a brushed-metal plate (Des18's IMG_20180115_143924) came out
 #: with concentric rings in the metal round it. Degree 4 (version 6): the rings are gone; Des19 diffuse
-#: 0.0386 either way, held-out relight 0.0583 -> 0.0582, card relight 0.1459 -> 0.1458. 0: version 5's.
+#: 0.0386 either way, held-out relight 0.0583 -> 0.0582, card relight 0.1459 -> 0.1458.
 RADIAL_DEGREE = 4
 #: Encoded values at or above this (times the photo's clip level) are clipped.
 CLIPPED = cv.CLIPPED
@@ -313,11 +313,9 @@ def flatten_radial(diffuse, rho, rings=PROFILE_RINGS // 2, weights=None):
     if valid.sum() < 3:
         return diffuse
     mean = np.interp(centres, centres[valid], mean[valid])
-    if RADIAL_DEGREE:  # a smooth trend only: ring-to-ring changes are the material's own (a sign, a tile)
-        t = centres / max(float(centres[-1]), 1e-6)
-        smooth = np.polyval(np.polyfit(t, mean, RADIAL_DEGREE, w=np.sqrt(np.maximum(n, 0.0))), t)
-    else:
-        smooth = np.convolve(np.pad(mean, 1, mode="edge"), np.ones(3) / 3, mode="valid")
+    # a smooth trend only: ring-to-ring changes are the material's own (a sign, a tile)
+    t = centres / max(float(centres[-1]), 1e-6)
+    smooth = np.polyval(np.polyfit(t, mean, RADIAL_DEGREE, w=np.sqrt(np.maximum(n, 0.0))), t)
     level = float((n * smooth).sum() / n.sum())
     trend = np.interp(rho.ravel(), centres, smooth - level).reshape(rho.shape)
     if weights is not None:

@@ -256,24 +256,25 @@ def _spec_change(change, tint):
 
 
 def _radial(side, centre, rings=RADIAL_RINGS):
-    """(distance of each pixel to ``centre`` (H, W), ring centres, ring of each pixel (flat)) at ``side``²."""
+    """(distance of each pixel to ``centre`` (H, W), ring centres, ring of each pixel (flat), pixels per
+    ring) at ``side``², the rings of :func:`svbrdf_cli.physical._rings`; made once per level."""
+    from svbrdf_cli.physical import _rings
+
     p = cv.surface_positions(side, side)
     rho = np.hypot(p[..., 0] - centre[0], p[..., 1] - centre[1]).astype(np.float32)
-    edges = np.linspace(0.0, float(rho.max()) + 1e-6, rings + 1)
-    ring = np.clip(np.digitize(rho.ravel(), edges) - 1, 0, rings - 1)
-    return rho, 0.5 * (edges[:-1] + edges[1:]), ring
+    ring, centres = _rings(rho, rings)
+    return rho, centres, ring, np.bincount(ring, minlength=rings).astype(np.float64)
 
 
 def _without_radial_trend(change, radial):
     """``change`` (H, W, C) less its ring means' departure from its mean, interpolated between ring
     centres (so no ring edge shows): what is left varies from pixel to pixel, not with the distance."""
-    rho, centres, ring = radial
-    count = np.bincount(ring, minlength=len(centres)).astype(np.float64)
+    rho, centres, ring, count = radial
+    ok = count > 0
     out = np.empty_like(change)
     for c in range(change.shape[-1]):
         v = change[..., c]
         means = np.bincount(ring, weights=v.ravel().astype(np.float64), minlength=len(centres))
-        ok = count > 0
         trend = means[ok] / count[ok] - float(v.mean())
         t = np.interp(rho, centres[ok], trend).astype(np.float32)
         out[..., c] = v - (t - float(t.mean()))  # (interpolated, the trend's own mean is not quite 0)
