@@ -28,14 +28,17 @@ import time
 import numpy as np
 
 from svbrdf_cli import conventions as cv
-from svbrdf_cli.inference import MODELS_DIR, ModelError, installed_tiers
-from svbrdf_cli.models import PHYSICAL, load_model
+from svbrdf_cli.inference import MODELS_DIR, Chain, ModelError, installed_tiers
 
 #: Where the calibrated rule is shipped.
 RULE_FILE = os.path.join(MODELS_DIR, "auto.json")
+#: The ladder's first rung: the physical estimate, which needs no model file (the name
+#: ``svbrdf_cli.models.PHYSICAL`` gives it; ``models`` loads this module, so it is not imported here).
+PHYSICAL = "physical"
+
+
 def available_tiers():
-    """What a ladder may step through, cheapest first: the physical estimate (:data:`svbrdf_cli.models.PHYSICAL`,
-    no model file), then the installed networks."""
+    """What a ladder may step through, cheapest first: the physical estimate, then the installed networks."""
     return [PHYSICAL] + installed_tiers()
 
 
@@ -121,8 +124,13 @@ class AutoModel:
         self.timings, self.decision, self._used = {}, None, None
 
     def chain(self, tier):
-        if tier not in self._chains:
-            self._chains[tier] = load_model(tier, threads=self.threads)
+        if tier not in self._chains:  # (not svbrdf_cli.models.load_model: models loads this module)
+            if tier == PHYSICAL:
+                from svbrdf_cli.physical import PhysicalModel
+
+                self._chains[tier] = PhysicalModel()
+            else:
+                self._chains[tier] = Chain(os.path.join(MODELS_DIR, tier), threads=self.threads)
         return self._chains[tier]
 
     @property
