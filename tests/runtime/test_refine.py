@@ -260,3 +260,48 @@ def test_refinement_leaves_no_disc_in_roughness_round_the_highlight(monkeypatch)
     monkeypatch.setattr(refine, "NO_RADIAL_TREND", True)
     res = refine.refine(photo, start, geo, 40)
     assert free > 0.01 and disc(res) < 0.3 * free and not res.report["kept_start"]
+
+
+def _problem(rng, side=12, priors=None):
+    tilt, diffuse, rough, spec = _random_maps(rng, side, np.float32)
+    photo = rng.uniform(0.05, 0.6, (side, side, 3)).astype(np.float32)
+    init = {"tilt": tilt, "diffuse": np.log(diffuse), "roughness": rough, "specular": spec}
+    geo = geometry.CaptureGeometry(camera=(0.1, 0.0, 2.4), light=(0.1, 0.0, 2.4), highlight=(0.1, 0.0))
+    return refine._Problem(photo, init, geo, 3.0, priors or refine.Priors(), side), init
+
+
+def test_the_objectives_gradient_matches_finite_differences():
+    rng = np.random.default_rng(7)
+    prob, init = _problem(rng)
+    p = {k: (v + rng.normal(0, 0.05, v.shape)).astype(np.float32) for k, v in init.items()}
+    _, _, g = prob(p)
+    for key in p:
+        for _ in range(3):
+            idx = tuple(int(rng.integers(0, s)) for s in p[key].shape)
+            eps = 1e-3
+            hi, lo = {k: v.astype(np.float64) for k, v in p.items()}, {k: v.astype(np.float64) for k, v in p.items()}
+            hi[key][idx] += eps
+            lo[key][idx] -= eps
+            numeric = (prob(hi)[0] - prob(lo)[0]) / (2 * eps)
+            assert g[key][idx] == pytest.approx(numeric, rel=0.05, abs=2e-6), (key, idx)
+
+
+def test_the_dielectric_prior_holds_f0s_level_not_its_colour():
+    rng = np.random.default_rng(2)
+    only = refine.Priors(**dict({f: 0.0 for f in refine.Priors.__dataclass_fields__}, dielectric=1.0))
+    prob, init = _problem(rng, priors=only)
+    prob.weight = np.zeros_like(prob.weight)  # the dielectric prior alone
+    luma = np.asarray(cv.LUMA, np.float32)
+    teal = np.array([0.01, 0.05, 0.045], np.float32)
+    teal *= cv.DIELECTRIC_F0 / float(teal @ luma)  # a coloured F0 at a dielectric's level
+    def prior(spec):
+        total, _, g = prob(dict(init, specular=np.broadcast_to(spec, init["specular"].shape).astype(np.float32)))
+        return total, g["specular"]
+
+    cost, grad = prior(teal)
+    assert cost == pytest.approx(0.0, abs=1e-9)  # no pull on its colour ...
+    cost, _ = prior(np.full(3, 0.1, np.float32))
+    assert cost > 1e-3                          # ... but on its level
+    _, grad = prior(np.full(3, 0.1, np.float32) * teal / teal.mean())
+    # the pull lowers the level (gradient along the luminance weights, all positive)
+    assert np.all(grad > 0)
