@@ -12,6 +12,8 @@ For each method (:mod:`export.methods`) and each setting (no refinement, ``--ref
 * **Des19**: per-map RMSE by the reference scorer (``score_maps.py``, linear albedo), and the
   re-rendering RMSE against the ground truth under :data:`HELD_OUT_LIGHTS` (9 lights, none at
   the input's flash);
+* **generated photos** (``--generated N``, off by default): a third set, neither the card nor Des19: N
+  photos from the data engine, re-rendered under :data:`HELD_OUT_LIGHTS` (:func:`generated_relight`);
 * **time**: median of ``--repeat`` runs of the refinement alone at 256^2, and of the whole
   ``svbrdf capture`` job (``--size 1024``) on the bundled sample.
 
@@ -34,7 +36,7 @@ import torch
 
 from export import methods as method_zoo
 from export.benchmark import NineLights, _chw
-from export.evaluate import load_des19, relight_rmse, score
+from export.evaluate import load_des19, relight_rmse, render, score
 from export.files import command_errors, shared_root
 from svbrdf_cli import conventions as cv
 from svbrdf_cli import geometry, refine
@@ -49,6 +51,30 @@ HELD_OUT_LIGHTS = [(1.2 * math.cos(a), 1.2 * math.sin(a), cv.CAMERA_HEIGHT)
 def held_out_relight(pred_linear, gt_linear):
     """Mean RMSE of encoded renders under :data:`HELD_OUT_LIGHTS` (maps as (C, H, W) linear tensors)."""
     return relight_rmse(pred_linear, gt_linear, HELD_OUT_LIGHTS)
+
+
+#: Seed of the generated photos of ``--generated`` (a set that is neither the card nor Des19).
+GENERATED_SEED = 12345
+
+
+def generated_relight(method, samples):
+    """Mean held-out relighting RMSE of ``method`` on generated ``samples`` ((network input, linear GT
+    maps of (C, H, W))): the predicted maps re-rendered under :data:`HELD_OUT_LIGHTS` against the ground
+    truth's, after one intensity fitted so that the two match under the input's flash (the estimate's
+    albedo level is a convention, the data engine's exposure is not)."""
+    from svbrdf_cli.mapset import stored_to_linear
+
+    flash = (0.0, 0.0, cv.CAMERA_HEIGHT)
+    errs = []
+    for image, gt in samples:
+        lin = stored_to_linear({k: v for k, v in method(image).items() if k in cv.MAP_NAMES})
+        pred = {k: torch.from_numpy(np.ascontiguousarray(np.asarray(lin[k], np.float32).transpose(2, 0, 1)))
+                for k in cv.MAP_NAMES}
+        a, b = (render(*(m[k][None] for k in cv.MAP_NAMES), light=flash) for m in (pred, gt))
+        k = float((a * b).sum() / (a * a).sum().clamp_min(1e-12))
+        pred["diffuse"], pred["specular"] = pred["diffuse"] * k, (pred["specular"] * k).clamp(0, 1)
+        errs.append(held_out_relight(pred, gt))
+    return float(np.mean(errs))
 
 
 def refined(method, iterations, timings=None):
@@ -82,7 +108,7 @@ def capture_seconds(model, refine_n, repeat, size=1024):
     return float(np.median(times))
 
 
-def run(names=None, iterations=refine.DEFAULT_ITERATIONS, limit=None, repeat=3, log=print, extra=None):
+def run(names=None, iterations=refine.DEFAULT_ITERATIONS, limit=None, repeat=3, log=print, extra=None, generated=0):
     root = shared_root() / "data"
     des19_dir = str(root / "validation" / "des19")
     samples = load_des19(des19_dir)[:limit] if limit else load_des19(des19_dir)
@@ -95,6 +121,10 @@ def run(names=None, iterations=refine.DEFAULT_ITERATIONS, limit=None, repeat=3, 
     card_in = nine.network_input()
     work = tempfile.mkdtemp(prefix="svbrdf-refine-")
     rows = []
+    if generated:
+        from export.auto_calibration import generated as generate
+
+        photos = generate(generated, seed=GENERATED_SEED)
     # (method, what `svbrdf capture --model` takes for it)
     zoo = [(m, m.name) for m in method_zoo.available(threads=1)
            if m.name not in ("floor", "auto", "e2e") and (not names or m.name in names)]
@@ -105,6 +135,8 @@ def run(names=None, iterations=refine.DEFAULT_ITERATIONS, limit=None, repeat=3, 
             f = refined(m, n, t)
             r = {"method": m.name, "refine": n, "card_relight": nine.relight_rmse(f(card_in))}
             r.update(des19(f, samples, des19_dir, os.path.join(work, f"{m.name}-{n}")))
+            if generated:
+                r[f"generated{generated}_relight"] = generated_relight(f, photos)
             if n:
                 r["refine_s_256"] = float(np.median(t))
             if repeat:
@@ -154,14 +186,17 @@ def figure(photos, path, iterations=refine.DEFAULT_ITERATIONS, tile=192, side_li
 @click.option("--figure", "figure_out", type=click.Path(dir_okay=False), default=None,
               help="Only draw the before/after figure of --photo files into this PNG.")
 @click.option("--photo", "photos", multiple=True, type=click.Path(exists=True, dir_okay=False))
-def cli(methods, iterations, limit, repeat, json_out, figure_out, photos, extra):
+@click.option("--generated", default=0, show_default=True,
+              help="Also the held-out relighting of N photos from the data engine (seed GENERATED_SEED).")
+def cli(methods, iterations, limit, repeat, json_out, figure_out, photos, extra, generated):
     torch.set_num_threads(1)
     if figure_out:
         with command_errors():
             figure(photos, figure_out, iterations)
         return
     with command_errors():
-        rows = run(methods.split(",") if methods else None, iterations, limit, repeat, log=click.echo, extra=extra)
+        rows = run(methods.split(",") if methods else None, iterations, limit, repeat, log=click.echo, extra=extra,
+                   generated=generated)
     if json_out:
         with open(json_out, "w") as f:
             json.dump(rows, f, indent=2)
