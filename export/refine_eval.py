@@ -67,9 +67,7 @@ def generated_relight(method, samples):
     flash = (0.0, 0.0, cv.CAMERA_HEIGHT)
     errs = []
     for image, gt in samples:
-        lin = stored_to_linear({k: v for k, v in method(image).items() if k in cv.MAP_NAMES})
-        pred = {k: torch.from_numpy(np.ascontiguousarray(np.asarray(lin[k], np.float32).transpose(2, 0, 1)))
-                for k in cv.MAP_NAMES}
+        pred = _chw(stored_to_linear({k: v for k, v in method(image).items() if k in cv.MAP_NAMES}))
         a, b = (render(*(m[k][None] for k in cv.MAP_NAMES), light=flash) for m in (pred, gt))
         k = float((a * b).sum() / (a * a).sum().clamp_min(1e-12))
         pred["diffuse"], pred["specular"] = pred["diffuse"] * k, (pred["specular"] * k).clamp(0, 1)

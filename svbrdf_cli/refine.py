@@ -125,6 +125,8 @@ SPECULAR_FLOOR = cv.DIELECTRIC_F0
 NO_RADIAL_TREND = True
 RADIAL_RINGS = 16
 TILT_LIMIT = 3.0  # 72 degrees
+#: Luminance weights, as the priors on F0's level use them (made once, not at every step).
+_LUMA = np.asarray(cv.LUMA, np.float32)
 
 
 @dataclasses.dataclass
@@ -237,10 +239,9 @@ class _Problem:
             total += pr.up_broad * float((b * b).sum()) / (2 * n)
             g["tilt"] += pr.up_broad * 2.0 * _broad(b) / (2 * n)
         # the dielectric prior holds F0's level (its luminance), not its colour (see Priors.dielectric)
-        luma = np.asarray(cv.LUMA, np.float32)
-        ds = p["specular"] @ luma - cv.DIELECTRIC_F0
+        ds = p["specular"] @ _LUMA - cv.DIELECTRIC_F0
         total += pr.dielectric * float((ds * ds).sum()) / n
-        g["specular"] += pr.dielectric * 2.0 * ds[..., None] * luma / n
+        g["specular"] += pr.dielectric * 2.0 * ds[..., None] * _LUMA / n
         for key, w in (("roughness", pr.smooth_roughness), ("specular", pr.smooth_specular)):
             val, gs = _smoothness(p[key])
             total += w * val * self.smooth_scale
@@ -317,7 +318,7 @@ def _project(p):
     p["roughness"] = np.clip(p["roughness"], *ROUGHNESS_RANGE)
     p["specular"] = np.clip(p["specular"], *SPECULAR_RANGE)
     if SPECULAR_FLOOR:  # grey added to every pixel when the map's mean luminance is under the floor
-        short = SPECULAR_FLOOR - float((p["specular"] @ np.asarray(cv.LUMA, np.float32)).mean())
+        short = SPECULAR_FLOOR - float((p["specular"] @ _LUMA).mean())
         if short > 0:
             p["specular"] = np.clip(p["specular"] + np.float32(short), *SPECULAR_RANGE)
 
