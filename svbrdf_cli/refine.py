@@ -125,6 +125,12 @@ SPECULAR_FLOOR = cv.DIELECTRIC_F0
 NO_RADIAL_TREND = True
 RADIAL_RINGS = 16
 TILT_LIMIT = 3.0  # 72 degrees
+#: Where the photo clipped (no photo term), the fit's change to diffuse, roughness and F0 is taken
+#: from the surrounding pixels' change once the fit is done, instead of the start's values the
+#: priors hold there: the change is the photo's evidence about the material (a glossier tile, a
+#: brighter diffuse), and the clipped disc is the same material. Without it the bundled sample's
+#: F0 showed a dark disc at the clipped highlight inside a ring that had moved.
+FILL_UNOBSERVED = True
 #: Luminance weights, as the priors on F0's level use them (made once, not at every step).
 _LUMA = np.asarray(cv.LUMA, np.float32)
 
@@ -333,6 +339,25 @@ def fit_intensity(photo_lin, params, geometry):
     return num / den if den > 0 else cv.FLASH_INTENSITY
 
 
+def _fill_unobserved(start, p, unobserved, radial=None):
+    """``p`` with its change from ``start`` (diffuse, roughness, F0) at the ``unobserved`` pixels (the
+    photo clipped them) taken from their surroundings' change (:func:`svbrdf_cli.physical.fill_from_surroundings`),
+    roughness's and F0's then freed of any radial trend again (``radial``: :func:`_radial`). The photo
+    term is per pixel, so the fill leaves it as it is; see :data:`FILL_UNOBSERVED`."""
+    from svbrdf_cli.physical import fill_from_surroundings
+
+    if not unobserved.any() or unobserved.all():
+        return p
+    out = dict(p)
+    for k in ("diffuse", "roughness", "specular"):
+        change = fill_from_surroundings(p[k] - start[k], unobserved)
+        if radial is not None and k != "diffuse":
+            change = _without_radial_trend(change, radial)
+        out[k] = (start[k] + change).astype(np.float32)
+    _project(out)
+    return out
+
+
 def refine(image, stored, geometry, iterations=DEFAULT_ITERATIONS, priors=None, progress=None):
     """Refine ``stored`` maps against the encoded photo ``image`` lit as ``geometry`` says.
 
@@ -399,6 +424,9 @@ def refine(image, stored, geometry, iterations=DEFAULT_ITERATIONS, priors=None, 
         total, data, _ = full(p)
         if np.isfinite(total) and (best_total is None or total < best_total):
             best, best_data = p, data
+    if FILL_UNOBSERVED:
+        best = _fill_unobserved(start, best, full.weight[..., 0] <= 0,
+                                _radial(side, geometry.highlight[:2]) if NO_RADIAL_TREND else None)
     out = _stored(best)
     ok = all(np.isfinite(v).all() for v in out.values()) and best_data <= loss_before
     if not ok:

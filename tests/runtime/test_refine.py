@@ -305,3 +305,47 @@ def test_the_dielectric_prior_holds_f0s_level_not_its_colour():
     _, grad = prior(np.full(3, 0.1, np.float32) * teal / teal.mean())
     # the pull lowers the level (gradient along the luminance weights, all positive)
     assert np.all(grad > 0)
+
+
+def test_highlight_centre_is_not_pulled_by_bright_coloured_texture():
+    # a teal surface, its white flash highlight at (0.15, -0.1), and a bright yellow patch (gold foil)
+    # far from it: brighter in luminance than the highlight's shoulder, but with no blue in it
+    photo, _ = _photo((0.3, -0.2, 2.4), roughness=0.3, textured=False)
+    lin = cv.image_to_linear(photo) * np.float32([0.35, 1.0, 1.0])  # teal: little red anywhere...
+    p = cv.surface_positions(*lin.shape[:2])
+    patch = np.hypot(p[..., 0] + 0.5, p[..., 1] - 0.5) < 0.25
+    lin[patch] = [1.0, 1.0, 0.02]  # ...and a yellow patch, luminance 0.93
+    image = cv.image_to_encoded(lin).astype(np.float32)
+    luma = cv2.GaussianBlur(lin @ np.asarray(cv.LUMA, np.float32), (0, 0), 4.0)
+    assert patch[np.unravel_index(int(np.argmax(luma)), luma.shape)]  # by luminance the patch is the peak
+    hx, hy = geometry.highlight_centre(image)
+    assert abs(hx - 0.15) <= 0.04 and abs(hy + 0.1) <= 0.04
+
+
+def test_what_the_photo_clipped_takes_the_surroundings_change():
+    # the start's diffuse is 0.6x the truth round the flash: the fit raises it wherever it sees the photo;
+    # a clipped disc (no photo term there) takes the same rise from its surroundings, not the start's level
+    light = (0.0, 0.0, 2.4)
+    photo, truth = _photo(light, camera=light, roughness=0.25, size=128, seed=3, textured=False)
+    p = cv.surface_positions(128, 128)
+    disc = np.hypot(p[..., 0], p[..., 1]) < 0.15
+    photo = photo.copy()
+    photo[disc] = 1.0
+    near = (np.hypot(p[..., 0], p[..., 1]) < 0.5)[..., None]
+    start = _stored(dict(truth, diffuse=truth["diffuse"] * np.where(near, 0.6, 1.0).astype(np.float32)))
+    geo = geometry.CaptureGeometry(camera=light, light=light, highlight=light[:2])
+    unobserved = refine._unclipped(cv.image_to_linear(photo))[..., 0] == 0
+
+    def rise(res):
+        d = cv.decode_maps(res.stored)["diffuse"][..., 1] / (0.6 * truth["diffuse"][..., 1])
+        ring = ~unobserved & (np.hypot(p[..., 0], p[..., 1]) < 0.4)
+        return float(d[unobserved].mean()), float(d[ring].mean())
+
+    inside, around = rise(refine.refine(photo, start, geo, 40))
+    assert around > 1.05 and inside - 1.0 > 0.5 * (around - 1.0)  # filled
+    refine.FILL_UNOBSERVED = False
+    try:
+        inside_off, _ = rise(refine.refine(photo, start, geo, 40))
+    finally:
+        refine.FILL_UNOBSERVED = True
+    assert inside_off - 1.0 < 0.2 * (around - 1.0)  # without the fill the disc stays at the start's level
