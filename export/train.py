@@ -281,6 +281,11 @@ def train_stage(stage, out, config, steps=None, minutes=None, resume=True, check
     resumed = resume and t.resume()
     if resumed:
         log(f"{stage}: resuming at step {t.step}/{t.total}")
+        if steps and int(steps) != t.total:  # a new total: to extend a run, or to end it here (provenance written)
+            if int(steps) < t.step:
+                raise SvbrdfError(f"{t.path}: already at step {t.step}; give --steps {t.step} or more to end it there")
+            log(f"{stage}: the run's total set to {int(steps)} steps (was {t.total})")
+            t.total = int(steps)
     elif init_from:
         log(f"{stage}: {t.init_from(init_from)}")
     if t.total is None:
@@ -368,7 +373,7 @@ def load_trained(out, tier=None, device="cpu", stages=STAGES):
 @click.option("--tier", type=click.Choice(ALL_TIERS), default="fast", show_default=True,
               help="lite: one small end-to-end UNet; fast, balanced, best: the chain at three widths.")
 @click.option("--out", type=click.Path(file_okay=False), default=None, help="Run folder (default runs/<tier>).")
-@click.option("--steps", type=int, default=None, help="Steps per stage (split for --stage all).")
+@click.option("--steps", type=int, default=None, help="Steps per stage (split for --stage all). On a resumed run, its new total: more to extend it, its current step to end it there (validation and provenance written).")
 @click.option("--minutes", type=float, default=None, help="Time budget instead of --steps (split for --stage all).")
 @click.option("--batch", default=8, show_default=True)
 @click.option("--size", default=128, show_default=True, help="Training crop size (multiple of 32).")

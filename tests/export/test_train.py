@@ -44,6 +44,19 @@ def test_resume_continues_the_same_run(tmp_path):
         assert torch.allclose(v.float(), w.float(), atol=1e-6), k
 
 
+def test_an_interrupted_run_can_be_ended_where_it_stopped(tmp_path):
+    # a long run killed at a checkpoint: --steps equal to its step ends it there, with its provenance
+    part = TR.train_stage("masks", str(tmp_path), CFG, steps=10, progress=False, log=_quiet, until=3)
+    assert part.step == 3 and not (tmp_path / "provenance.json").exists()
+    with pytest.raises(SvbrdfError, match="already at step 3"):
+        TR.train_stage("masks", str(tmp_path), CFG, steps=2, progress=False, log=_quiet)
+    ended = TR.train_stage("masks", str(tmp_path), CFG, steps=3, progress=False, log=_quiet)
+    assert ended.step == 3 and len(ended.history) == 3
+    from export.files import read_json
+
+    assert read_json(str(tmp_path / "provenance.json"))["stages"]["masks"]["steps"] == 3
+
+
 def test_later_stages_need_the_earlier_ones(tmp_path):
     with pytest.raises(SvbrdfError, match="masks"):
         TR.StageTrainer("aux", str(tmp_path), CFG)
