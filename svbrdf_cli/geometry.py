@@ -27,6 +27,7 @@ import math
 import numpy as np
 
 from svbrdf_cli import conventions as cv
+from svbrdf_cli import highlight
 
 #: Half the diagonal of a 35 mm film frame (36 x 24 mm), in mm: 35 mm-equivalent focal lengths
 #: are defined on the diagonal.
@@ -35,9 +36,6 @@ HALF_DIAGONAL_35MM = 0.5 * math.hypot(36.0, 24.0)
 MAX_FLASH_OFFSET = 0.2
 #: Heights accepted from EXIF, in surface units (a crop seeing 1.5 to 150 degrees).
 HEIGHT_RANGE = (0.5, 80.0)
-#: The highlight blob: pixels of the blurred brightness above this fraction of the way from its
-#: median to its peak.
-BLOB_LEVEL = 0.7
 
 
 @dataclasses.dataclass
@@ -96,34 +94,13 @@ def camera_foot(photo_size, box):
 
 
 def highlight_centre(image):
-    """(x, y) surface position of the flash highlight (or, on a matte surface, of the brightness peak).
+    """(x, y) surface position of the flash highlight (or, on a matte surface, of the brightness peak):
+    the centre of :func:`svbrdf_cli.highlight.find`'s blob.
 
     Args:
         image: (H, W, 3) encoded photo in [0, 1].
     """
-    import cv2
-
-    lin = cv.image_to_linear(np.asarray(image, np.float32))
-    # The weakest channel, not the luminance: a dielectric's highlight adds the flash's (white)
-    # light to every channel, a coloured albedo is bright in some channels only, so bright
-    # coloured texture (the gold scales of a teal card) pulls the blob less (measured on
-    # card_blue_9lights: 0.127 from the camera's foot instead of 0.163; relight after --refine
-    # 0.1221 instead of 0.1230).
-    lum = np.ascontiguousarray(lin.min(-1), np.float32)
-    h, w = lum.shape
-    b = cv2.GaussianBlur(lum, (0, 0), max(1.0, w / 64.0), borderType=cv2.BORDER_REFLECT)
-    peak = np.unravel_index(int(np.argmax(b)), b.shape)
-    top, base = float(b[peak]), float(np.median(b))
-    thr = base + BLOB_LEVEL * (top - base)
-    blob = (b >= thr).astype(np.uint8)
-    _, labels = cv2.connectedComponents(blob)
-    mask = labels == labels[peak]
-    wgt = np.where(mask, b - thr, 0.0)
-    p = cv.surface_positions(h, w)
-    total = float(wgt.sum())
-    if total <= 0:
-        return float(p[peak][0]), float(p[peak][1])
-    return float((wgt * p[..., 0]).sum() / total), float((wgt * p[..., 1]).sum() / total)
+    return highlight.find(image).centre
 
 
 def estimate(image, height=None, focal=None, photo_size=None, box=None):

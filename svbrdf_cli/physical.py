@@ -48,10 +48,11 @@ import time
 import numpy as np
 
 from svbrdf_cli import conventions as cv
+from svbrdf_cli import highlight
 
 #: Bumped whenever the estimate's output changes: a network trained to refine one version
 #: must be fed that version (written into exported models and checked when they load).
-PHYSICAL_VERSION = "6"
+PHYSICAL_VERSION = "7"
 
 #: Roughness values the lobe fit tries (the lobe's width picks one).
 ROUGHNESS_GRID = np.linspace(0.08, 1.0, 47)
@@ -97,6 +98,16 @@ SUBTRACT_FLOOR = 0.25
 RADIAL_DEGREE = 4
 #: Encoded values at or above this (times the photo's clip level) are clipped.
 CLIPPED = cv.CLIPPED
+#: Fill the highlight left in the diffuse at the highlight's own peak (:func:`highlight_residue`): a
+#: patch of the diffuse this much brighter than the diffuse round the photo's highlight blob.
+RESIDUE_FILL = True
+RESIDUE_LEVEL = 0.2
+#: ... and this much whiter than the diffuse's median (weakest over strongest channel). Without this
+#: rule the brightest patch of a matte textured surface was taken too (a brick on 4 of Des19's brick
+#: and cobble samples: their diffuse error rose, 0.0254 -> 0.0286 on one); the patches found on Des19
+#: and the 12 real benchmark photos whitened by -0.11 to 0.19, a speckled worktop's clear-coat glint
+#: by 0.44 (henzler_train IMG_0785). A grey material has no colour to whiten and is never filled.
+RESIDUE_WHITENING = 0.25
 #: Separate the highlight from the diffuse by colour where the material has one
 #: (:func:`separate_by_colour`): the dichromatic reflection model.
 COLOUR_SEPARATION = True
@@ -473,6 +484,49 @@ def separate_by_colour(lin, share, tint, unreliable, reference=None):
     return diffuse.astype(np.float32), trust.astype(np.float32)
 
 
+def highlight_residue(diffuse, blob, level=None):
+    """(H, W) bool: the highlight left in ``diffuse`` at the photo's highlight (``blob``:
+    :func:`svbrdf_cli.highlight.find`): the bright connected patch of the diffuse that holds the blob's
+    peak, stands :data:`RESIDUE_LEVEL` above the level of the diffuse round the blob and is whiter
+    than the material elsewhere by :data:`RESIDUE_WHITENING` (weakest over strongest channel). A highlight
+    sharper than the fitted lobe (a clear coat over a rough base: two lobes where the fit has one) keeps
+    its peak after the lobe's share is taken off; an albedo has no reason to be brightest exactly where
+    the flash is reflected."""
+    import cv2
+
+    level = RESIDUE_LEVEL if level is None else level
+    h, w = diffuse.shape[:2]
+    none = np.zeros((h, w), bool)
+    k = max(3, (w // 16) | 1)
+    area = cv2.dilate(blob.mask.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))).astype(bool)
+    if area.all() or not area[blob.peak]:
+        return none
+    ld = _blur(_luma(diffuse), max(1.0, w / 256.0))  # not single noisy pixels
+    around = push_pull(ld, (~area).astype(np.float32), until_covered=True, fallback=float(ld.mean()))
+    bright = area & (ld > (1.0 + level) * around)
+    _, labels = cv2.connectedComponents(bright.astype(np.uint8))
+    if labels[blob.peak] == 0:
+        return none
+    spot = labels == labels[blob.peak]
+    # a highlight adds the flash's white: the patch must be clearly whiter than the material is
+    # elsewhere (a bright brick or a pale fleck under the flash keeps its own colour and is left)
+    lo, hi = _channel_min_max(diffuse)
+    whiteness = lo / np.maximum(hi, 1e-6)
+    if float(whiteness[spot].mean() - np.median(whiteness)) < RESIDUE_WHITENING:
+        return none
+    return cv2.dilate(spot.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))).astype(bool)
+
+
+def _texture_beside(diffuse, spot):
+    """(H, W) relative texture (brightness over its neighbourhood's) of ``diffuse`` just beside ``spot``,
+    moved onto it: what a filled patch is multiplied by so that it is not a flat, textureless blot."""
+    w = diffuse.shape[1]
+    lum = _luma(diffuse)
+    rel = np.clip(lum / np.maximum(_blur(lum, max(1.0, w / 64.0)), 1e-6), 1.0 / DETAIL_RANGE, DETAIL_RANGE)
+    cols = np.flatnonzero(spot.any(0))
+    return np.roll(rel, int(cols[-1] - cols[0]) + 3, axis=1).astype(np.float32)
+
+
 def specular_map(fit, lin, clipped, dominated, intensity):
     """F0 (RGB) from the fitted lobe: the dielectric's, or a metal's tinted by its highlight's colour
     (the photo's where the lobe dominates and nothing clipped; white balance is the flash's)."""
@@ -587,6 +641,10 @@ def estimate(image, geo=None, normal_strength=None, with_fit=False, metals=None)
         rel = np.clip(lum / np.maximum(_blur(lum, max(1.0, w / 64.0)), 1e-6), 1.0 / DETAIL_RANGE, DETAIL_RANGE)
         rel = np.where(flat_fill, 1.0, rel).astype(np.float32)
     diffuse = fill_from_surroundings(np.clip(diffuse, 0.0, None).astype(np.float32), bad, rel)
+    if RESIDUE_FILL:  # what the lobe did not take off at the highlight's own peak (a sharper highlight)
+        spot = highlight_residue(diffuse, highlight.find(img))
+        if spot.any():
+            diffuse = fill_from_surroundings(diffuse, spot, _texture_beside(diffuse, spot))
     if grey is not None and 0.02 < float(grey.mean()) < 0.98:  # the greys' own trend first (their highlight was
         diffuse = flatten_radial(diffuse, rho, weights=grey)  # taken off by the lobe's share, the rest's by colour)
     diffuse = flatten_radial(diffuse, rho)

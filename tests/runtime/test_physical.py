@@ -189,3 +189,62 @@ def test_clipped_highlight_darkened_by_the_exposure_is_filled_too():
         d = _linear(stored)["diffuse"]
         centre = d[SIZE // 2 - 3:SIZE // 2 + 3, SIZE // 2 - 3:SIZE // 2 + 3].reshape(-1, 3)
         assert np.abs(centre.mean(0) / np.median(d.reshape(-1, 3), 0) - 1).max() < 0.15
+
+
+def _coated(clear_coat, gradient=1.2, light=cv.FLASH_POSITION):
+    """A textured brown surface, darker towards one side (so the falloff's peak is not the highlight's),
+    with a rough base lobe and, if ``clear_coat``, a second, sharp one (a clear coat: the one-lobe fit
+    measures the broad lobe and leaves the sharp peak, as on a real speckled worktop)."""
+    rng = np.random.default_rng(0)
+    y = cv.surface_positions(SIZE, SIZE)[..., 1:2]
+    tex = 0.2 * (0.8 + 0.4 * rng.uniform(0, 1, (SIZE, SIZE, 1))) * np.exp(gradient * y)
+    base = render(np.zeros((SIZE, SIZE, 3)) + [0.0, 0.0, 1.0], tex * [1.0, 0.7, 0.45], np.full((SIZE, SIZE, 1), 0.7),
+                  np.full((SIZE, SIZE, 3), cv.DIELECTRIC_F0), light=light, intensity=cv.FLASH_INTENSITY)
+    if clear_coat:
+        base = base + render(np.zeros((SIZE, SIZE, 3)) + [0.0, 0.0, 1.0], np.zeros((SIZE, SIZE, 3)),
+                             np.full((SIZE, SIZE, 1), 0.25), np.full((SIZE, SIZE, 3), 0.01), light=light,
+                             intensity=cv.FLASH_INTENSITY)
+    return cv.image_to_encoded(np.clip(0.4 * base, 0, 1)).astype(np.float32), tex[..., 0]
+
+
+@pytest.mark.parametrize("fill", [True, False])
+def test_a_highlight_sharper_than_the_fit_is_not_left_in_the_diffuse(fill, monkeypatch):
+    monkeypatch.setattr(physical, "RESIDUE_FILL", fill)
+    img, tex = _coated(True)
+    d = _linear(physical.estimate(img)[0])["diffuse"].mean(-1)  # (its white is what gives the glint away)
+    c = SIZE // 2
+    spot = d[c - 3:c + 4, c - 3:c + 4].mean() / np.median(d)
+    if fill:
+        assert abs(spot - 1) < 0.15
+    else:
+        assert spot > 1.3  # the sharp peak is left: what the fill is for
+
+
+def test_the_residue_fill_leaves_a_surface_the_fit_explains_alone():
+    img, _ = _coated(False, gradient=0.0)  # one lobe, the falloff's peak at the highlight
+    on = _linear(physical.estimate(img)[0])["diffuse"]
+    physical.RESIDUE_FILL = False
+    try:
+        off = _linear(physical.estimate(img)[0])["diffuse"]
+    finally:
+        physical.RESIDUE_FILL = True
+    assert np.abs(on - off).max() < 1e-6
+
+
+def test_a_bright_patch_of_the_materials_own_colour_under_the_flash_is_kept():
+    # a matte brown surface with a brighter brown fleck where the flash points: albedo, not highlight (the
+    # residue fill leaves it as the rest of the estimate makes it)
+    p = cv.surface_positions(SIZE, SIZE)
+    fleck = (np.hypot(p[..., 0], p[..., 1]) < 0.08)[..., None]
+    albedo = np.where(fleck, 0.5, 0.2) * np.array([1.0, 0.7, 0.45])
+    img = cv.image_to_encoded(0.4 * render(np.zeros((SIZE, SIZE, 3)) + [0.0, 0.0, 1.0], albedo,
+                                           np.full((SIZE, SIZE, 1), 0.9), np.full((SIZE, SIZE, 3), cv.DIELECTRIC_F0),
+                                           intensity=cv.FLASH_INTENSITY)).astype(np.float32)
+    assert not physical.highlight_residue(_linear(physical.estimate(img)[0])["diffuse"], physical.highlight.find(img)).any()
+    on = physical.estimate(img)[0]["diffuse"]
+    physical.RESIDUE_FILL = False
+    try:
+        off = physical.estimate(img)[0]["diffuse"]
+    finally:
+        physical.RESIDUE_FILL = True
+    assert np.array_equal(on, off)
