@@ -484,7 +484,7 @@ def separate_by_colour(lin, share, tint, unreliable, reference=None):
     return diffuse.astype(np.float32), trust.astype(np.float32)
 
 
-def highlight_residue(diffuse, blob, level=None):
+def highlight_residue(diffuse, blob):
     """(H, W) bool: the highlight left in ``diffuse`` at the photo's highlight (``blob``:
     :func:`svbrdf_cli.highlight.find`): the bright connected patch of the diffuse that holds the blob's
     peak, stands :data:`RESIDUE_LEVEL` above the level of the diffuse round the blob and is whiter
@@ -494,7 +494,6 @@ def highlight_residue(diffuse, blob, level=None):
     the flash is reflected."""
     import cv2
 
-    level = RESIDUE_LEVEL if level is None else level
     h, w = diffuse.shape[:2]
     none = np.zeros((h, w), bool)
     k = max(3, (w // 16) | 1)
@@ -503,7 +502,7 @@ def highlight_residue(diffuse, blob, level=None):
         return none
     ld = _blur(_luma(diffuse), max(1.0, w / 256.0))  # not single noisy pixels
     around = push_pull(ld, (~area).astype(np.float32), until_covered=True, fallback=float(ld.mean()))
-    bright = area & (ld > (1.0 + level) * around)
+    bright = area & (ld > (1.0 + RESIDUE_LEVEL) * around)
     _, labels = cv2.connectedComponents(bright.astype(np.uint8))
     if labels[blob.peak] == 0:
         return none
@@ -517,14 +516,34 @@ def highlight_residue(diffuse, blob, level=None):
     return cv2.dilate(spot.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))).astype(bool)
 
 
+def _relative_texture(lum):
+    """(H, W) brightness over its neighbourhood's (1/64 of the width), within :data:`DETAIL_RANGE`: the
+    texture a fill is multiplied by so that it is not a flat, textureless blot."""
+    w = lum.shape[1]
+    return np.clip(lum / np.maximum(_blur(lum, max(1.0, w / 64.0)), 1e-6), 1.0 / DETAIL_RANGE, DETAIL_RANGE)
+
+
 def _texture_beside(diffuse, spot):
-    """(H, W) relative texture (brightness over its neighbourhood's) of ``diffuse`` just beside ``spot``,
-    moved onto it: what a filled patch is multiplied by so that it is not a flat, textureless blot."""
-    w = diffuse.shape[1]
-    lum = _luma(diffuse)
-    rel = np.clip(lum / np.maximum(_blur(lum, max(1.0, w / 64.0)), 1e-6), 1.0 / DETAIL_RANGE, DETAIL_RANGE)
+    """(H, W) relative texture (:func:`_relative_texture`) of ``diffuse`` just beside ``spot``, moved onto it."""
     cols = np.flatnonzero(spot.any(0))
-    return np.roll(rel, int(cols[-1] - cols[0]) + 3, axis=1).astype(np.float32)
+    return np.roll(_relative_texture(_luma(diffuse)), int(cols[-1] - cols[0]) + 3, axis=1).astype(np.float32)
+
+
+def _residue_spot(img, diffuse):
+    """:func:`highlight_residue` of the estimate's ``diffuse`` at the encoded photo ``img``'s highlight, found on
+    a copy of at most :data:`FOOT_SIDE` px (like the flash's foot: the blob and the patch are broad shapes, and
+    at the output size the blur, dilation and push-pull cost seconds) and brought back to full size."""
+    import cv2
+
+    h, w = diffuse.shape[:2]
+    if max(h, w) <= FOOT_SIDE:
+        return highlight_residue(diffuse, highlight.find(img))
+
+    def small(x):
+        return cv2.resize(np.ascontiguousarray(x, np.float32), (FOOT_SIDE, FOOT_SIDE), interpolation=cv2.INTER_AREA)
+
+    spot = highlight_residue(small(diffuse), highlight.find(small(img)))
+    return cv2.resize(spot.astype(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST).astype(bool)
 
 
 def specular_map(fit, lin, clipped, dominated, intensity):
@@ -638,11 +657,10 @@ def estimate(image, geo=None, normal_strength=None, with_fit=False, metals=None)
     rel = None
     if bad.any():  # the texture under the highlight: the photo's brightness over its neighbourhood's (the
         # lobe is smooth at that scale), none where it clipped
-        rel = np.clip(lum / np.maximum(_blur(lum, max(1.0, w / 64.0)), 1e-6), 1.0 / DETAIL_RANGE, DETAIL_RANGE)
-        rel = np.where(flat_fill, 1.0, rel).astype(np.float32)
+        rel = np.where(flat_fill, 1.0, _relative_texture(lum)).astype(np.float32)
     diffuse = fill_from_surroundings(np.clip(diffuse, 0.0, None).astype(np.float32), bad, rel)
     if RESIDUE_FILL:  # what the lobe did not take off at the highlight's own peak (a sharper highlight)
-        spot = highlight_residue(diffuse, highlight.find(img))
+        spot = _residue_spot(img, diffuse)
         if spot.any():
             diffuse = fill_from_surroundings(diffuse, spot, _texture_beside(diffuse, spot))
     if grey is not None and 0.02 < float(grey.mean()) < 0.98:  # the greys' own trend first (their highlight was

@@ -425,8 +425,7 @@ def refine(image, stored, geometry, iterations=DEFAULT_ITERATIONS, priors=None, 
         if np.isfinite(total) and (best_total is None or total < best_total):
             best, best_data = p, data
     if FILL_UNOBSERVED:
-        best = _fill_unobserved(start, best, full.weight[..., 0] <= 0,
-                                _radial(side, geometry.highlight[:2]) if NO_RADIAL_TREND else None)
+        best = _fill_unobserved(start, best, full.weight[..., 0] <= 0, radial)  # (the last level's: full size)
     out = _stored(best)
     ok = all(np.isfinite(v).all() for v in out.values()) and best_data <= loss_before
     if not ok:
