@@ -62,10 +62,38 @@ class RunConfig:
     val_samples: int = 16
     variant: str = "chain"   # or a Table IV ablation: "nomask", "e2e" (export.nets.chain.VARIANTS)
     refine: bool = True      # the maps stage corrects the physical estimate (svbrdf_cli.physical)
+    #: The level of the diffuse and specular targets (see :func:`level_factor`): "convention", what the
+    #: photo shows at the conventions' flash power (the physical estimate's reading), or "true", the
+    #: material's own albedo (runs before session 12).
+    albedo_level: str = "convention"
+
+
+ALBEDO_LEVELS = ("convention", "true")
+
+
+def level_factor(batch):
+    """(B,) how much brighter the photo's flash lit the surface than the conventions' flash does:
+    ``intensity / height^2`` over ``FLASH_INTENSITY / CAMERA_HEIGHT^2`` (the irradiance under the flash).
+
+    The physical estimate (and every capture) reads albedo at the conventions' flash power, since one
+    photo cannot tell a dark material under a strong flash from a bright one under a weak flash. Half the
+    generated photos are auto-exposed, so their true albedo is that reading divided by this factor, which
+    nothing in the photo tells. Trained on the true albedo, a network learns a guess of the exposure
+    (session 11's checkpoint made Des19's albedo 1.66x too bright: the best per-sample scale of its
+    diffuse and specular had median 0.60), and Des19's inputs, like a capture at the conventions' power,
+    need none. Targets times this factor ask for the reading the photo supports.
+    """
+    height = batch["capture"]["camera"][:, 2]
+    k = batch["intensity"].reshape(-1).double() * cv.CAMERA_HEIGHT ** 2 / (cv.FLASH_INTENSITY * height * height)
+    return k.float()
 
 
 def _stored_targets(batch):
-    return cv.encode_maps({k: batch[k] for k in cv.MAP_NAMES})
+    maps = {k: batch[k] for k in cv.MAP_NAMES}
+    if "level" in batch:  # albedo at the conventions' flash power (RunConfig.albedo_level)
+        k = batch["level"].reshape(-1, 1, 1, 1).to(maps["diffuse"])
+        maps["diffuse"], maps["specular"] = (maps["diffuse"] * k).clamp(0, 1), (maps["specular"] * k).clamp(0, 1)
+    return cv.encode_maps(maps)
 
 
 class StageTrainer:
@@ -166,6 +194,9 @@ class StageTrainer:
         if ck["config"].get("refine", False) != self.cfg.refine:
             raise SvbrdfError(f"{self.path}: was trained with refine={ck['config'].get('refine', False)}, "
                               f"not {self.cfg.refine}")
+        if ck["config"].get("albedo_level", "true") != self.cfg.albedo_level:
+            raise SvbrdfError(f"{self.path}: was trained with --albedo-level {ck['config'].get('albedo_level', 'true')}, "
+                              f"not {self.cfg.albedo_level}")
         if ck["config"].get("variant", "chain") != self.cfg.variant:
             raise SvbrdfError(f"{self.path}: was trained as variant {ck['config'].get('variant', 'chain')!r}, "
                               f"not {self.cfg.variant!r}")
@@ -192,6 +223,8 @@ class StageTrainer:
         b = dataset.make_batch(generator or self.gen, n or self.cfg.batch, self.data_cfg, self.bank, device="cpu")
         if self.stage == "maps" and getattr(self.net, "refine", False):
             b["physical"] = physical_input(b["photo"])
+        if self.stage == "maps" and self.cfg.albedo_level == "convention":
+            b["level"] = level_factor(b)
         return {k: v.to(self.device) for k, v in b.items() if torch.is_tensor(v)}
 
     def losses(self, b, train=True):
@@ -330,7 +363,7 @@ def record_provenance(out, trainer, val):
     prov = read_json(path)
     cfg = trainer.cfg
     prov.setdefault("stages", {})[trainer.stage] = {
-        "tier": cfg.tier, "variant": cfg.variant, "refine": cfg.refine,
+        "tier": cfg.tier, "variant": cfg.variant, "refine": cfg.refine, "albedo_level": cfg.albedo_level if trainer.stage == "maps" else None,
         "physical_version": PHYSICAL_VERSION if cfg.refine else None, "steps": trainer.step, "batch": cfg.batch, "size": cfg.size, "seed": cfg.seed,
         "device": str(trainer.device) + ("" if trainer.device.type != "cpu" else f" ({platform.processor() or platform.machine()}, {torch.get_num_threads()} threads)"),
         "seconds": round(trainer.elapsed, 1), "samples_seen": trainer.step * cfg.batch,
@@ -394,8 +427,11 @@ def load_trained(out, tier=None, device="cpu", stages=STAGES):
 @click.option("--variant", type=click.Choice(tuple(VARIANTS)), default=None,
               help="chain: the paper's model; nomask / e2e: Table IV ablations (aux without masks; "
                    "one UNet from photo to maps with the chain's parameter count). Default: the tier's own.")
+@click.option("--albedo-level", type=click.Choice(ALBEDO_LEVELS), default="convention", show_default=True,
+              help="The maps stage's diffuse and specular targets: at the conventions' flash power, as the photo and "
+                   "the physical estimate read them, or the material's true albedo (runs before session 12).")
 def cli(stage, tier, out, steps, minutes, batch, size, device, seed, threads, fresh, init_from, no_adversarial,
-        checkpoint_every, val_every, shared, refine, variant):
+        checkpoint_every, val_every, shared, refine, variant, albedo_level):
     """Train the model stage by stage."""
     if threads:
         torch.set_num_threads(threads)
@@ -408,7 +444,7 @@ def cli(stage, tier, out, steps, minutes, batch, size, device, seed, threads, fr
     out = out or os.path.join("runs", tier if variant == tier_variant(tier) else f"{tier}-{variant}")
     bank = dataset.SeedBank.find(shared)
     cfg = RunConfig(tier=tier, size=size, batch=batch, seed=seed, device=device, adversarial=not no_adversarial,
-                    variant=variant, refine=refine)
+                    variant=variant, refine=refine, albedo_level=albedo_level)
     stages = VARIANTS[variant] if stage == "all" else (stage,)
     for s in stages:
         share = ALL_SPLIT[s] / sum(ALL_SPLIT[x] for x in stages) if stage == "all" else 1.0

@@ -161,7 +161,8 @@ def make_batch(g, batch, config=DataConfig(), seeds=None, device=None, dtype=tor
     Returns:
         dict: ``photo``, ``I`` and :data:`AUX_NAMES` (B, 3, H, W) encoded
         images in [0, 1]; linear maps (keys of ``MAP_NAMES``); ``capture``
-        (the simulator's parameters); ``source`` (B names).
+        (the simulator's parameters); ``intensity`` (B,) the flash intensity the photo was
+        taken with (auto exposure's, or the fixed power); ``source`` (B names).
     """
     maps = materials(g, batch, config, seeds, device, dtype)
     capture = simulate.sample_capture(g, batch, config.capture)
@@ -169,7 +170,7 @@ def make_batch(g, batch, config=DataConfig(), seeds=None, device=None, dtype=tor
     with torch.no_grad():
         aux = render_targets.intermediate_targets(maps, light=capture["light"].to(dtype), intensity=shot["intensity"],
                                      names=config.targets, camera=capture["camera"].to(dtype))
-    out = {"photo": shot["photo"], "I": shot["I"], **aux}
+    out = {"photo": shot["photo"], "I": shot["I"], "intensity": shot["intensity"], **aux}
     out.update({k: maps[k] for k in cv.MAP_NAMES})
     out["capture"] = capture
     out["source"] = maps["source"]

@@ -145,3 +145,42 @@ def test_a_run_can_start_from_another_runs_weights(tmp_path):
     TR.train_stage("maps", str(tmp_path / "c"), lite, steps=1, progress=False, log=_quiet,
                    init_from=str(tmp_path / "a" / "maps.pt"))
     assert TR.read_json(tmp_path / "c" / "provenance.json")["stages"]["maps"]["initialised_from"]["tensors"] == len(old)
+
+
+def _fake_batch(intensity, height):
+    import svbrdf_cli.conventions as cv
+
+    n = len(intensity)
+    maps = {"normal": torch.zeros(n, 3, 4, 4), "diffuse": torch.full((n, 3, 4, 4), 0.3),
+            "roughness": torch.full((n, 1, 4, 4), 0.5), "specular": torch.full((n, 3, 4, 4), 0.04)}
+    maps["normal"][:, 2] = 1.0
+    cam = torch.zeros(n, 3, dtype=torch.float64)
+    cam[:, 2] = torch.tensor(height, dtype=torch.float64) * cv.CAMERA_HEIGHT
+    return {**maps, "intensity": torch.tensor(intensity, dtype=torch.float64) * cv.FLASH_INTENSITY, "capture": {"camera": cam}}
+
+
+def test_targets_at_the_conventions_flash_power():
+    """The irradiance under the flash over the conventions': 1 for the conventions' flash, 2 for twice the
+    power, 1/4 from twice as high. Diffuse and specular targets scale by it (clipped at 1), the rest not."""
+    from svbrdf_cli import conventions as cv
+
+    b = _fake_batch([1.0, 2.0, 1.0, 10.0], [1.0, 1.0, 2.0, 1.0])
+    k = TR.level_factor(b)
+    assert torch.allclose(k, torch.tensor([1.0, 2.0, 0.25, 10.0]))
+    plain = cv.decode_maps(TR._stored_targets(b), axis=1)
+    scaled = cv.decode_maps(TR._stored_targets({**b, "level": k}), axis=1)
+    for i, f in enumerate(k.tolist()):
+        assert torch.allclose(scaled["diffuse"][i], (plain["diffuse"][i] * f).clamp(max=1), atol=1e-4)
+        assert torch.allclose(scaled["specular"][i], (plain["specular"][i] * f).clamp(max=1), atol=1e-4)
+    assert torch.equal(scaled["roughness"], plain["roughness"]) and torch.equal(scaled["normal"], plain["normal"])
+
+
+def test_a_run_resumes_only_at_its_own_albedo_level(tmp_path):
+    import dataclasses
+
+    lite = dataclasses.replace(CFG, tier="lite", variant="e2e")
+    TR.train_stage("maps", str(tmp_path), lite, steps=1, progress=False, log=_quiet)
+    assert TR.read_json(tmp_path / "provenance.json")["stages"]["maps"]["albedo_level"] == "convention"
+    with pytest.raises(SvbrdfError, match="albedo-level"):
+        TR.train_stage("maps", str(tmp_path), dataclasses.replace(lite, albedo_level="true"), steps=2,
+                       progress=False, log=_quiet)
