@@ -62,9 +62,9 @@ class RunConfig:
     val_samples: int = 16
     variant: str = "chain"   # or a Table IV ablation: "nomask", "e2e" (export.nets.chain.VARIANTS)
     refine: bool = True      # the maps stage corrects the physical estimate (svbrdf_cli.physical)
-    #: The level of the diffuse and specular targets (see :func:`level_factor`): "convention", what the
-    #: photo shows at the conventions' flash power (the physical estimate's reading), or "true", the
-    #: material's own albedo (runs before session 12).
+    #: The level of the diffuse targets (see :func:`level_factor`): "convention", what the photo shows
+    #: at the conventions' flash power (the physical estimate's reading), or "true", the material's own
+    #: albedo (runs before session 12). F0 targets are the material's either way.
     albedo_level: str = "convention"
 
 
@@ -81,7 +81,10 @@ def level_factor(batch):
     nothing in the photo tells. Trained on the true albedo, a network learns a guess of the exposure
     (session 11's checkpoint made Des19's albedo 1.66x too bright: the best per-sample scale of its
     diffuse and specular had median 0.60), and Des19's inputs, like a capture at the conventions' power,
-    need none. Targets times this factor ask for the reading the photo supports.
+    need none. Diffuse targets times this factor ask for the reading the photo supports. F0 is left as it
+    is, as the estimate leaves it (0.04, a dielectric's constant): scaled too, it asked the network to
+    guess the exposure for F0 instead (Des19 specular 0.082 -> 0.135 after 200 steps), and an F0 above
+    0.04 on a dielectric is the metal-like specular that engine presets turn into chrome.
     """
     height = batch["capture"]["camera"][:, 2]
     k = batch["intensity"].reshape(-1).double() * cv.CAMERA_HEIGHT ** 2 / (cv.FLASH_INTENSITY * height * height)
@@ -90,9 +93,8 @@ def level_factor(batch):
 
 def _stored_targets(batch):
     maps = {k: batch[k] for k in cv.MAP_NAMES}
-    if "level" in batch:  # albedo at the conventions' flash power (RunConfig.albedo_level)
-        k = batch["level"].reshape(-1, 1, 1, 1).to(maps["diffuse"])
-        maps["diffuse"], maps["specular"] = (maps["diffuse"] * k).clamp(0, 1), (maps["specular"] * k).clamp(0, 1)
+    if "level" in batch:  # the diffuse at the conventions' flash power (RunConfig.albedo_level)
+        maps["diffuse"] = (maps["diffuse"] * batch["level"].reshape(-1, 1, 1, 1).to(maps["diffuse"])).clamp(0, 1)
     return cv.encode_maps(maps)
 
 
@@ -428,8 +430,8 @@ def load_trained(out, tier=None, device="cpu", stages=STAGES):
               help="chain: the paper's model; nomask / e2e: Table IV ablations (aux without masks; "
                    "one UNet from photo to maps with the chain's parameter count). Default: the tier's own.")
 @click.option("--albedo-level", type=click.Choice(ALBEDO_LEVELS), default="convention", show_default=True,
-              help="The maps stage's diffuse and specular targets: at the conventions' flash power, as the photo and "
-                   "the physical estimate read them, or the material's true albedo (runs before session 12).")
+              help="The maps stage's diffuse targets: at the conventions' flash power, as the photo and the physical "
+                   "estimate read them, or the material's true albedo (runs before session 12). F0: the material's.")
 def cli(stage, tier, out, steps, minutes, batch, size, device, seed, threads, fresh, init_from, no_adversarial,
         checkpoint_every, val_every, shared, refine, variant, albedo_level):
     """Train the model stage by stage."""
