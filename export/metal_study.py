@@ -58,20 +58,12 @@ def features(image, geo=None):
     r, prof, wts = ph._profile(lum, clipped, rho)
     unb = {"m0": 0.0, "m1": 0.0, "res_u": 1.0, "res_l": 1.0, "r_l": ph.DEFAULT_ROUGHNESS}
     if len(r) >= 6:
-        heights = geo.height * ph.HEIGHT_GRID
-        sh, dd = ph.shading_at(r[None, :], heights[:, None], geo.height)
-        s = sh[:, None, :]
-        g = ph.lobe(dd[:, None, :], heights[:, None, None], ph.ROUGHNESS_GRID[None, :, None]) \
-            * (heights[:, None, None] / geo.height) ** 2
-        wt = wts[None, None, :]
+        t = ph.lobe_terms(r, prof, wts, geo)
+        s, g, wt, m0, m1 = t.s, t.g, t.w, t.m0, t.m1
         flat = max(float((wts * (prof - (wts * prof).sum() / wts.sum()) ** 2).sum()), 1e-20)
         c1 = np.maximum((wt * g * prof).sum(-1) / np.maximum((wt * g * g).sum(-1), 1e-30), 0.0)
         res_l = (wt * (prof - c1[..., None] * g) ** 2).sum(-1)
         j = np.unravel_index(int(np.argmin(res_l)), res_l.shape)
-        sss, sgg, ssg = (wt * s * s).sum(-1), (wt * g * g).sum(-1), (wt * s * g).sum(-1)
-        sy, gy = (wt * s * prof).sum(-1), (wt * g * prof).sum(-1)
-        det = np.maximum(sss * sgg - ssg * ssg, 1e-30)
-        m0, m1 = (sgg * sy - ssg * gy) / det, (sss * gy - ssg * sy) / det
         res_u = np.where((m0 >= 0) & (m1 > 0), (wt * (prof - m0[..., None] * s - m1[..., None] * g) ** 2).sum(-1), np.inf)
         k = np.unravel_index(int(np.argmin(res_u)), res_u.shape)
         unb["res_l"], unb["r_l"] = float(res_l[j]) / flat, float(ph.ROUGHNESS_GRID[j[1]])

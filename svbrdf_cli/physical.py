@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+import types
 
 import numpy as np
 
@@ -249,6 +250,24 @@ def shading_at(rho, height, ref_height):
     return height / d ** 3 * (height / ref_height) ** 2, d
 
 
+def lobe_terms(rho, prof, wts, geo):
+    """Every (height, roughness) pair of :data:`HEIGHT_GRID` x :data:`ROUGHNESS_GRID` at once, at the ring
+    profile ``(rho, prof, wts)`` (:func:`_profile`): ``heights`` (H,), the flat surface's falloff ``s``
+    (H, 1, N), the lobe ``g`` (H, R, N), the ring weights ``w`` (1, 1, N), the sums ``sss = sum w s s`` and
+    ``sy = sum w s prof``, and the unconstrained 2x2 least squares ``prof = m0 s + m1 g``
+    (``m0``, ``m1``: (H, R)), which every hypothesis about the profile starts from."""
+    heights = geo.height * HEIGHT_GRID
+    sh, dd = shading_at(rho[None, :], heights[:, None], geo.height)
+    s = sh[:, None, :]
+    g = lobe(dd[:, None, :], heights[:, None, None], ROUGHNESS_GRID[None, :, None]) * (heights[:, None, None] / geo.height) ** 2
+    w = wts[None, None, :]
+    sss, sgg, ssg = (w * s * s).sum(-1), (w * g * g).sum(-1), (w * s * g).sum(-1)
+    sy, gy = (w * s * prof).sum(-1), (w * g * prof).sum(-1)
+    det = np.maximum(sss * sgg - ssg * ssg, 1e-30)
+    return types.SimpleNamespace(heights=heights, s=s, g=g, w=w, sss=sss, sy=sy,
+                                 m0=(sgg * sy - ssg * gy) / det, m1=(sss * gy - ssg * sy) / det)
+
+
 def fit_lobe(lum, clipped, rho, geo, metals=False):
     """Fit the ring-averaged brightness around the foot with a flat surface's diffuse falloff plus its
     flash highlight, over :data:`HEIGHT_GRID` x :data:`ROUGHNESS_GRID`.
@@ -268,18 +287,9 @@ def fit_lobe(lum, clipped, rho, geo, metals=False):
                     geo.height, False, 0.0)
     base = float((wts * prof).sum() / wts.sum())
     res_flat = float((wts * (prof - base) ** 2).sum())
-    heights = geo.height * HEIGHT_GRID
-    # every (height, roughness) pair at once: s (H, 1, R) shading, g (H, G, R) lobe
-    sh, dd = shading_at(rho[None, :], heights[:, None], geo.height)
-    s = sh[:, None, :]
-    rgh = ROUGHNESS_GRID[None, :, None]
-    g = lobe(dd[:, None, :], heights[:, None, None], rgh) * (heights[:, None, None] / geo.height) ** 2
-    w = wts[None, None, :]
-    # both hypotheses share the unconstrained 2x2 least squares: prof = c0 * s + c1 * g
-    sss, sgg, ssg = (w * s * s).sum(-1), (w * g * g).sum(-1), (w * s * g).sum(-1)
-    sy, gy = (w * s * prof).sum(-1), (w * g * prof).sum(-1)
-    det = np.maximum(sss * sgg - ssg * ssg, 1e-30)
-    m0, m1 = (sgg * sy - ssg * gy) / det, (sss * gy - ssg * sy) / det
+    t = lobe_terms(rho, prof, wts, geo)
+    heights, s, g, w, m0, m1 = t.heights, t.s, t.g, t.w, t.m0, t.m1
+    sss, sy = t.sss, t.sy
     # dielectric: 0 <= c1 <= MAX_LOBE_RATIO * c0 (its F0 is 0.04, its albedo at least half that)
     k = MAX_LOBE_RATIO
     sk = s + k * g
