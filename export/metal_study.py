@@ -16,6 +16,11 @@ convention the diffuse level is read at), clipped to [0.04, 1].
 
 The score is the mean over photos of |mean GT F0 - predicted F0| (one value per photo; the metric's
 per-pixel RMSE behaves the same for constant maps).
+
+It also tests the cue issue 14 names, "a coloured highlight over a dark diffuse", as a rule with no
+fitted weights (:func:`colour_rule`): a metal reflects in its own colour, so its highlight is as
+coloured as the rest of the photo and of the same hue, and it outshines the rest (no diffuse under
+it); a dielectric's highlight is the light's colour, whiter than a coloured material round it.
 """
 
 from __future__ import annotations
@@ -35,15 +40,51 @@ NAMES = ("lp10", "lm0", "lc0", "p99", "clip", "sat", "dsat", "rl", "rd", "lres",
 TRAIN, TEST = (777, 256), (31337, 256)
 #: Mean GT specular above which a Des19 sample counts as a metal (its dielectrics store 0.043).
 DES19_METAL = 0.08
+#: :func:`colour_rule`: the highlight's least saturation, the share of the darker half's saturation it
+#: must keep, its least brightness over the photo's median, and the most hue difference (degrees).
+COLOUR_RULE = {"saturation": 0.15, "keeps": 0.85, "outshines": 5.0, "hue": 30.0}
 
 
 def _saturation(c):
     return float((c.max() - c.min()) / max(float(c.max()), 1e-6))
 
 
+def _hue(c):
+    import colorsys
+
+    return 360.0 * colorsys.rgb_to_hsv(*(float(v) for v in c / max(float(c.max()), 1e-9)))[0]
+
+
+def highlight_colour(image):
+    """The highlight's colour against the rest of one encoded photo (H, W, 3): the mean linear colour of
+    the brightest 1 % of the unclipped pixels against that of the darker half. Returns a dict: ``hl_sat``
+    and ``lo_sat`` (their saturations), ``dhue`` (their hue difference, degrees) and ``outshines`` (the
+    highlight's luminance over the median's)."""
+    im = np.asarray(image, np.float32)
+    lin = cv.image_to_linear(im).astype(np.float32)
+    lum = ph._luma(lin)
+    ok = ~(im >= ph.CLIPPED).any(-1)
+    if ok.sum() < 100:
+        return {"hl_sat": 0.0, "lo_sat": 0.0, "dhue": 180.0, "outshines": 1.0}
+    hi = ok & (lum >= np.quantile(lum[ok], 0.99))
+    ch, cl = lin[hi].mean(0), lin[lum <= np.quantile(lum, 0.5)].mean(0)
+    dh = abs(_hue(ch) - _hue(cl))
+    return {"hl_sat": _saturation(ch), "lo_sat": _saturation(cl), "dhue": min(dh, 360.0 - dh),
+            "outshines": float(lum[hi].mean() / max(float(np.median(lum)), 1e-9))}
+
+
+def colour_rule(f, rule=None):
+    """Issue 14's cue as a rule (:data:`COLOUR_RULE`) over :func:`highlight_colour`'s measures: a
+    coloured highlight, as coloured as the rest of the photo and of its hue, that outshines it."""
+    r = rule or COLOUR_RULE
+    return bool(f["hl_sat"] >= r["saturation"] and f["hl_sat"] >= r["keeps"] * f["lo_sat"]
+                and f["outshines"] >= r["outshines"] and f["dhue"] <= r["hue"])
+
+
 def features(image, geo=None):
     """The flash fit's evidence about metal for one encoded photo (H, W, 3): a dict of :data:`NAMES`
-    plus ``m1``, the unbounded fit's lobe height over the flash power (a metal's F0 reading)."""
+    plus ``m1``, the unbounded fit's lobe height over the flash power (a metal's F0 reading), and
+    :func:`highlight_colour`'s measures."""
     geo = geo or ph.Geometry()
     im = np.asarray(image, np.float32)
     lin = cv.image_to_linear(im).astype(np.float32)
@@ -77,6 +118,7 @@ def features(image, geo=None):
          "dsat": _saturation(ci) - _saturation(lin[outer].mean(0)), "rl": unb["r_l"], "rd": fd.roughness,
          "lres": np.log((unb["res_l"] + 1e-3) / (1.0 - fd.gain + 1e-3)), "lm1": np.log(unb["m1"] + 1e-3),
          "lp50": np.log(p50 + 1e-3), "contrast": np.log((p99 + 1e-3) / (p10 + 1e-3)), "m1": unb["m1"]}
+    f.update(highlight_colour(im))
     return {k: float(np.nan_to_num(v)) for k, v in f.items()}
 
 
@@ -104,8 +146,7 @@ def _generated(seed, count):
     return rows, gt, gt > 0.2
 
 
-def _report(tag, p, rows, gt, metal, log):
-    call = p > 0.5
+def _report(tag, call, rows, gt, metal, log):
     f0 = np.where(call, np.clip([r["m1"] for r in rows], cv.DIELECTRIC_F0, 1.0), cv.DIELECTRIC_F0)
     log(f"{tag:<22} metals {int(metal.sum()):>3}/{len(rows):<4} called {int(call.sum()):>3}: {int((call & metal).sum())} metals, "
         f"{int((call & ~metal).sum())} dielectrics | |F0 error| {np.abs(gt - f0).mean():.4f} (F0 = 0.04 everywhere: "
@@ -118,8 +159,11 @@ def study(log=print):
     train, gt_a, metal_a = _generated(*TRAIN)
     test, gt_b, metal_b = _generated(*TEST)
     predict = fit_logistic(_matrix(train), metal_a.astype(np.float64))
-    _report(f"generated (train {TRAIN[0]})", predict(_matrix(train)), train, gt_a, metal_a, log)
-    _report(f"generated (test {TEST[0]})", predict(_matrix(test)), test, gt_b, metal_b, log)
+    colour = lambda rows: np.array([colour_rule(r) for r in rows])  # noqa: E731
+    for tag, rows, gt, metal in ((f"generated (train {TRAIN[0]})", train, gt_a, metal_a),
+                                 (f"generated (test {TEST[0]})", test, gt_b, metal_b)):
+        _report(tag, predict(_matrix(rows)) > 0.5, rows, gt, metal, log)
+        _report("  colour rule", colour(rows), rows, gt, metal, log)
     root = shared_root()
     if not (root / "data" / "validation" / "des19").is_dir():
         log("../shared not found: Des19 and the real photos are left out")
@@ -129,7 +173,8 @@ def study(log=print):
     des = load_des19(str(root / "data" / "validation" / "des19"))
     rows = [features(img.permute(1, 2, 0).numpy()) for _, img, _ in des]
     gt = np.array([float(m["specular"].mean()) for _, _, m in des])
-    _report("Des19", predict(_matrix(rows)), rows, gt, gt > DES19_METAL, log)
+    _report("Des19", predict(_matrix(rows)) > 0.5, rows, gt, gt > DES19_METAL, log)
+    _report("  colour rule", colour(rows), rows, gt, gt > DES19_METAL, log)
     from svbrdf_cli import ingest, pipeline, rectify
 
     names, rows = [], []
@@ -147,6 +192,10 @@ def study(log=print):
     log(f"real photos: {len(called)} of {len(rows)} called metal (their F0 reading m1 in brackets):")
     for q, n, m1 in sorted(called, reverse=True):
         log(f"  P {q:.2f}  F0 {min(max(m1, cv.DIELECTRIC_F0), 1.0):.3f}  {n}")
+    called = [(n, r["m1"]) for n, r in zip(names, rows) if colour_rule(r)]
+    log(f"real photos: {len(called)} of {len(rows)} called metal by the colour rule:")
+    for n, m1 in called:
+        log(f"  F0 {min(max(m1, cv.DIELECTRIC_F0), 1.0):.3f}  {n}")
 
 
 @click.command()

@@ -89,10 +89,11 @@ class Auto:
 class Refined:
     """``method`` followed by ``--refine`` (:func:`svbrdf_cli.refine.refine`) under the photo's estimated
     geometry, as ``svbrdf capture`` runs it on a photo without EXIF (the height from the physical
-    estimate's falloff fit). ``timings`` collects the refinement's own seconds."""
+    estimate's falloff fit). ``timings`` collects the refinement's own seconds; ``priors``: a
+    :class:`svbrdf_cli.refine.Priors` (default weights when None)."""
 
-    def __init__(self, method, iterations, timings=None):
-        self.method, self.iterations, self.timings = method, int(iterations), timings
+    def __init__(self, method, iterations, timings=None, priors=None):
+        self.method, self.iterations, self.timings, self.priors = method, int(iterations), timings, priors
         self.name = f"{method.name}+refine"
         self.label = f"{method.label}, then --refine {self.iterations}"
         self.chain = getattr(method, "chain", None)
@@ -109,7 +110,7 @@ class Refined:
         stored = self.method(image)
         geo = geometry.estimate(image, height=self._flash_height(image))
         t0 = time.perf_counter()
-        res = refine.refine(image, stored, geo, self.iterations)
+        res = refine.refine(image, stored, geo, self.iterations, priors=self.priors)
         if self.timings is not None:
             self.timings.append(time.perf_counter() - t0)
         return {k: res.stored[k] for k in cv.MAP_NAMES}

@@ -22,6 +22,7 @@ Prints a table and writes it as JSON with ``--json``.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -75,10 +76,25 @@ def generated_relight(method, samples):
     return float(np.mean(errs))
 
 
-def refined(method, iterations, timings=None):
+def refined(method, iterations, timings=None, priors=None):
     """``method`` followed by :func:`svbrdf_cli.refine.refine` under the photo's estimated geometry
-    (:class:`export.methods.Refined`); ``method`` itself when ``iterations`` is 0."""
-    return method_zoo.Refined(method, iterations, timings) if iterations else method
+    (:class:`export.methods.Refined`, ``priors`` its :class:`svbrdf_cli.refine.Priors`); ``method`` itself
+    when ``iterations`` is 0."""
+    return method_zoo.Refined(method, iterations, timings, priors) if iterations else method
+
+
+def parse_priors(pairs):
+    """``("specular=10", ...)`` -> a :class:`svbrdf_cli.refine.Priors` with those weights changed (None if none)."""
+    if not pairs:
+        return None
+    names = {f.name for f in dataclasses.fields(refine.Priors)}
+    kw = {}
+    for pair in pairs:
+        name, _, value = pair.partition("=")
+        if name not in names or not value:
+            raise click.BadParameter(f"{pair!r}: expected NAME=VALUE with NAME one of {', '.join(sorted(names))}")
+        kw[name] = float(value)
+    return refine.Priors(**kw)
 
 
 def des19(method, samples, des19_dir, out):
@@ -106,7 +122,8 @@ def capture_seconds(model, refine_n, repeat, size=1024):
     return float(np.median(times))
 
 
-def run(names=None, iterations=refine.DEFAULT_ITERATIONS, limit=None, repeat=3, log=print, extra=None, generated=0):
+def run(names=None, iterations=refine.DEFAULT_ITERATIONS, limit=None, repeat=3, log=print, extra=None, generated=0,
+        priors=None):
     root = shared_root() / "data"
     des19_dir = str(root / "validation" / "des19")
     samples = load_des19(des19_dir)[:limit] if limit else load_des19(des19_dir)
@@ -130,7 +147,7 @@ def run(names=None, iterations=refine.DEFAULT_ITERATIONS, limit=None, repeat=3, 
     for m, model_arg in zoo:
         for n in (0, iterations):
             t = []
-            f = refined(m, n, t)
+            f = refined(m, n, t, priors)
             r = {"method": m.name, "refine": n, "card_relight": nine.relight_rmse(f(card_in))}
             r.update(des19(f, samples, des19_dir, os.path.join(work, f"{m.name}-{n}")))
             if generated:
@@ -186,15 +203,19 @@ def figure(photos, path, iterations=refine.DEFAULT_ITERATIONS, tile=192, side_li
 @click.option("--photo", "photos", multiple=True, type=click.Path(exists=True, dir_okay=False))
 @click.option("--generated", default=0, show_default=True,
               help="Also the held-out relighting of N photos from the data engine (seed GENERATED_SEED).")
-def cli(methods, iterations, limit, repeat, json_out, figure_out, photos, extra, generated):
+@click.option("--prior", "prior_pairs", multiple=True, metavar="NAME=VALUE",
+              help="A --refine prior weight other than the default's (svbrdf_cli.refine.Priors), e.g. specular=10; "
+                   "repeatable. The capture timings still run the default's.")
+def cli(methods, iterations, limit, repeat, json_out, figure_out, photos, extra, generated, prior_pairs):
     torch.set_num_threads(1)
+    priors = parse_priors(prior_pairs)
     if figure_out:
         with command_errors():
             figure(photos, figure_out, iterations)
         return
     with command_errors():
         rows = run(methods.split(",") if methods else None, iterations, limit, repeat, log=click.echo, extra=extra,
-                   generated=generated)
+                   generated=generated, priors=priors)
     if json_out:
         with open(json_out, "w") as f:
             json.dump(rows, f, indent=2)

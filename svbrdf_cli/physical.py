@@ -72,7 +72,11 @@ HEIGHT_GRID = np.array([0.75, 0.87, 1.0, 1.15, 1.35])
 #: separated the two on two independent generated sets. Metals are left to the networks. A logistic
 #: regression over 13 measures of the fit's evidence (``python -m export.metal_study``, session 12)
 #: found 8 of Des19's 11 metals with no false call, but called 14 of 267 real photos metal, every one
-#: I looked at a dark glossy dielectric (black plastic, leather, stained wood, granite).
+#: I looked at a dark glossy dielectric (black plastic, leather, stained wood, granite). Issue 14's own
+#: cue, a highlight as coloured as the rest of the photo (same study, session 13), called 4 of Des19's
+#: 11 metals and no dielectric, but left its F0 error where it was (0.0505), called 7 of 10
+#: dielectrics on generated photos, and on real photos a neutral material under a colour cast
+#: (gingham, black plastic) looks just like a tinted metal.
 DETECT_METALS = False
 #: A dielectric's lobe height over its diffuse level at most: F0 = 0.04 over an albedo
 #: of at least 0.02 (the darkest common dielectrics, black leather or rubber).

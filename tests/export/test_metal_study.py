@@ -32,3 +32,26 @@ def test_a_lobe_without_diffuse_reads_as_a_metal_and_a_matte_plane_does_not():
         assert set(metal_study.NAMES) <= set(f) and all(np.isfinite(v) for v in f.values())
     assert metal["m1"] > 0.04 > matte["m1"]            # the lobe's height is read as F0
     assert metal["lm0"] < matte["lm0"] and metal["contrast"] > matte["contrast"]
+
+
+def _coloured(diffuse_rgb, f0_rgb, roughness=0.15, size=128):
+    """An encoded photo like :func:`_photo` with per-channel diffuse and F0 (a white flash)."""
+    geo = ph.Geometry()
+    x, y = ph._grid(size, size)
+    rho = np.sqrt(x * x + y * y)
+    shading, d = ph.shading_at(rho, geo.height, geo.height)
+    lobe = ph.lobe(d, geo.height, roughness)
+    lin = np.stack([geo.intensity * (a * shading + f * lobe) for a, f in zip(diffuse_rgb, f0_rgb)], -1)
+    return np.clip(cv.image_to_encoded(lin), 0, 1).astype(np.float32)
+
+
+def test_the_colour_rule_calls_a_gold_highlight_and_not_a_white_one_over_a_coloured_diffuse():
+    gold = metal_study.features(_coloured((0.0, 0.0, 0.0), (0.5, 0.4, 0.15)))
+    glossy_red = metal_study.features(_coloured((0.3, 0.05, 0.03), (0.04, 0.04, 0.04)))
+    matte_red = metal_study.features(_coloured((0.3, 0.05, 0.03), (0.0, 0.0, 0.0)))
+    steel = metal_study.features(_coloured((0.0, 0.0, 0.0), (0.5, 0.5, 0.5)))
+    assert metal_study.colour_rule(gold)
+    assert glossy_red["hl_sat"] < glossy_red["lo_sat"]       # the light's white in the highlight
+    assert not metal_study.colour_rule(glossy_red)
+    assert not metal_study.colour_rule(matte_red)            # coloured, but nothing outshines the rest
+    assert not metal_study.colour_rule(steel)                # a grey metal has no colour to tell it by
