@@ -24,7 +24,9 @@ diffuse alone could copy the photo exactly, so the priors decide how the residua
   its colour; no other tint is added to explain a white highlight over a coloured diffuse), and
   the map's mean luminance never goes under that dielectric F0 (:data:`SPECULAR_FLOOR`): the photo
   may shape it from pixel to pixel but not lower the whole map;
-* **normals near the up direction** unless the photo needs them tilted.
+* **normals near the up direction** unless the photo needs them tilted;
+* **no trend with the distance to the highlight** in the diffuse's, roughness's and F0's changes
+  (:data:`NO_RADIAL_TREND`): no disc round the flash, no vignetting taken up by the diffuse.
 
 **Schedule.** Coarse to fine (:data:`LEVELS`): the changes are first found on a small image,
 where the smooth parts converge in few cheap steps, then upsampled and refined at the next
@@ -116,14 +118,22 @@ SPECULAR_RANGE = (0.0, 1.0)
 #:   reflect less than 0.04 in places: MaterialGAN's reference maps say so too);
 #: * this floor on the mean: Des19 specular 0.0591 (+0.7 %), card 0.1316 (-9.8 %).
 SPECULAR_FLOOR = cv.DIELECTRIC_F0
-#: Roughness and F0 may change from pixel to pixel but not with the distance to the highlight: after
-#: each step their change loses its trend over :data:`RADIAL_RINGS` rings round the highlight's
-#: centre (:func:`_without_radial_trend`; the map's mean change is kept). A material has no reason to
-#: be rougher or duller where the flash happened to point; a fit that makes it so is explaining the
-#: highlight's shape (sharper than the start's lobe, its clipped core left out) and leaves a disc
-#: round the flash in both maps.
+#: Diffuse, roughness and F0 may change from pixel to pixel but not with the distance to the
+#: highlight: after each step their change (the diffuse's in its logarithm: a relative change) loses its
+#: trend over :data:`RADIAL_RINGS` rings round the highlight's centre (:func:`_without_radial_trend`;
+#: the map's mean change is kept). A material has no reason to be rougher, duller or darker where the
+#: flash happened to point; a fit that makes it so is explaining the highlight's shape (sharper than
+#: the start's lobe, its clipped core left out) or the lens's vignetting and the flash's beam, and
+#: leaves a disc round the flash, or dark edges that show as a grid when the texture tiles.
 NO_RADIAL_TREND = True
 RADIAL_RINGS = 16
+#: The maps whose change loses its radial trend (:data:`NO_RADIAL_TREND`). The diffuse since session 13:
+#: on the 12 real benchmark photos (``svbrdf capture --size 512``) the fit had made the diffuse's edges
+#: darker than its centre by a median 10 % (log-brightness of the outer rings against the inner ones;
+#: the estimate's own: 4 %), now 4 %; the spread of its ring means fell from 0.052 to 0.044 (estimate
+#: 0.037). Cost on the synthetic sets, which have neither vignetting nor a beam: Des19 diffuse 0.0390 ->
+#: 0.0394, card relight 0.1217 -> 0.1224, 32 generated photos' relight 0.0771 -> 0.0775.
+RADIAL_FREE = ("diffuse", "roughness", "specular")
 TILT_LIMIT = 3.0  # 72 degrees
 #: Where the photo clipped (no photo term), the fit's change to diffuse, roughness and F0 is taken
 #: from the surrounding pixels' change once the fit is done, instead of the start's values the
@@ -342,7 +352,7 @@ def fit_intensity(photo_lin, params, geometry):
 def _fill_unobserved(start, p, unobserved, radial=None):
     """``p`` with its change from ``start`` (diffuse, roughness, F0) at the ``unobserved`` pixels (the
     photo clipped them) taken from their surroundings' change (:func:`svbrdf_cli.physical.fill_from_surroundings`),
-    roughness's and F0's then freed of any radial trend again (``radial``: :func:`_radial`). The photo
+    those of :data:`RADIAL_FREE` then freed of any radial trend again (``radial``: :func:`_radial`). The photo
     term is per pixel, so the fill leaves it as it is; see :data:`FILL_UNOBSERVED`."""
     from svbrdf_cli.physical import fill_from_surroundings
 
@@ -351,7 +361,7 @@ def _fill_unobserved(start, p, unobserved, radial=None):
     out = dict(p)
     for k in ("diffuse", "roughness", "specular"):
         change = fill_from_surroundings(p[k] - start[k], unobserved)
-        if radial is not None and k != "diffuse":
+        if radial is not None and k in RADIAL_FREE:
             change = _without_radial_trend(change, radial)
         out[k] = (start[k] + change).astype(np.float32)
     _project(out)
@@ -409,7 +419,7 @@ def refine(image, stored, geometry, iterations=DEFAULT_ITERATIONS, priors=None, 
                 delta[k] = (delta[k] - step).astype(np.float32)
             delta["specular"] = _spec_change(delta["specular"], tint)
             if radial is not None:
-                for k in ("roughness", "specular"):
+                for k in RADIAL_FREE:
                     delta[k] = _without_radial_trend(delta[k], radial)
             done += 1
             if progress:

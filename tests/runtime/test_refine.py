@@ -262,6 +262,26 @@ def test_refinement_leaves_no_disc_in_roughness_round_the_highlight(monkeypatch)
     assert free > 0.01 and disc(res) < 0.3 * free and not res.report["kept_start"]
 
 
+def test_refinement_leaves_the_cameras_vignetting_out_of_the_diffuse(monkeypatch):
+    light = (0.0, 0.0, 2.4)
+    photo, truth = _photo(light, camera=light, seed=3)
+    rho = refine._radial(256, light[:2])[0]
+    vignetting = (1.0 - 0.25 * (rho / rho.max()) ** 2)[..., None]  # the lens darkens the corners, not the material
+    photo = cv.image_to_encoded(cv.image_to_linear(photo) * vignetting).astype(np.float32)
+    start = _stored(truth)
+    geo = geometry.CaptureGeometry(camera=light, light=light, highlight=light[:2])
+
+    def edges_darker(res):
+        change = np.log(cv.decode_maps(res.stored)["diffuse"].mean(-1) / truth["diffuse"].mean(-1))
+        return float(change[rho < 0.3].mean() - change[rho > 1.0].mean())
+
+    monkeypatch.setattr(refine, "RADIAL_FREE", ("roughness", "specular"))
+    free = edges_darker(refine.refine(photo, start, geo, 40))
+    monkeypatch.setattr(refine, "RADIAL_FREE", ("diffuse", "roughness", "specular"))
+    res = refine.refine(photo, start, geo, 40)
+    assert free > 0.04 and abs(edges_darker(res)) < 0.3 * free and not res.report["kept_start"]
+
+
 def _problem(rng, side=12, priors=None):
     tilt, diffuse, rough, spec = _random_maps(rng, side, np.float32)
     photo = rng.uniform(0.05, 0.6, (side, side, 3)).astype(np.float32)
@@ -323,23 +343,26 @@ def test_highlight_centre_is_not_pulled_by_bright_coloured_texture():
 
 
 def test_what_the_photo_clipped_takes_the_surroundings_change():
-    # the start's diffuse is 0.6x the truth round the flash: the fit raises it wherever it sees the photo;
-    # a clipped disc (no photo term there) takes the same rise from its surroundings, not the start's level
+    # the start's diffuse is 0.6x the truth on a checkerboard's dark squares (neither one level, which the
+    # fitted intensity takes, nor a ring round the flash, which the radial rule takes out): the fit raises
+    # it wherever it sees the photo; a clipped disc (no photo term there) takes the same rise from its
+    # surroundings, not the start's level
     light = (0.0, 0.0, 2.4)
     photo, truth = _photo(light, camera=light, roughness=0.25, size=128, seed=3, textured=False)
     p = cv.surface_positions(128, 128)
-    disc = np.hypot(p[..., 0], p[..., 1]) < 0.15
+    off = np.hypot(p[..., 0] - 0.5, p[..., 1] - 0.5)  # a clipped blob away from the highlight (a sparkle, a label)
+    disc = off < 0.15
     photo = photo.copy()
     photo[disc] = 1.0
-    near = (np.hypot(p[..., 0], p[..., 1]) < 0.5)[..., None]
-    start = _stored(dict(truth, diffuse=truth["diffuse"] * np.where(near, 0.6, 1.0).astype(np.float32)))
+    dark = (np.floor((p[..., 0] - 0.25) / 0.5) + np.floor((p[..., 1] - 0.25) / 0.5)) % 2 == 0  # the blob's square too
+    start = _stored(dict(truth, diffuse=truth["diffuse"] * np.where(dark, 0.6, 1.0)[..., None].astype(np.float32)))
     geo = geometry.CaptureGeometry(camera=light, light=light, highlight=light[:2])
     unobserved = refine._unclipped(cv.image_to_linear(photo))[..., 0] == 0
 
     def rise(res):
         d = cv.decode_maps(res.stored)["diffuse"][..., 1] / (0.6 * truth["diffuse"][..., 1])
-        ring = ~unobserved & (np.hypot(p[..., 0], p[..., 1]) < 0.4)
-        return float(d[unobserved].mean()), float(d[ring].mean())
+        ring = ~unobserved & (off < 0.4)
+        return float(d[unobserved & dark].mean()), float(d[ring & dark].mean())
 
     inside, around = rise(refine.refine(photo, start, geo, 40))
     assert around > 1.05 and inside - 1.0 > 0.5 * (around - 1.0)  # filled
