@@ -214,6 +214,10 @@ def pareto_figure(rows, path, big=2048):
         if len(front) > 1:
             ax.step(*zip(*front), where="post", color="0.6", lw=1, zorder=1)
         ax.set_xscale("log")
+        lo, hi = ax.get_xlim()
+        short = np.log10(hi / lo) < 1.5  # an axis under two decades: its minor ticks labelled at 2 and 5 only
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.FuncFormatter(
+            lambda v, _, short=short: f"{v:g}" if short and round(v / 10 ** np.floor(np.log10(v))) in (2, 5) else ""))
         ax.set_xlabel(f"seconds per image at {tkey[2:]}² ({'network input to maps' if tkey == 's_256' else 'crop to upsampled maps'})")
         ax.set_ylabel("RMSE (lower is better)")
         ax.set_title(title, fontsize=10)
