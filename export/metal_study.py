@@ -1,6 +1,7 @@
 """Can the flash photo alone tell a metal from a dielectric? A study, not a shipped rule.
 
     python -m export.metal_study            # about 4 minutes on one core
+    python -m export.metal_study --model-dir EXPORT   # and a trained network's F0 on the same photos
 
 The physical estimate (:mod:`svbrdf_cli.physical`) gives every photo the dielectric F0 = 0.04
 (``DETECT_METALS = False``). This study asks whether a calibrated decision over the fit's physical
@@ -153,7 +154,16 @@ def _report(tag, call, rows, gt, metal, log):
         f"{np.abs(gt - cv.DIELECTRIC_F0).mean():.4f})")
 
 
-def study(log=print):
+#: A network's mean F0 above which :func:`study` lists a real photo (about 4x a dielectric's).
+NETWORK_CALL = 0.15
+
+
+def _network_f0(network, image):
+    """Mean linear F0 of ``network``'s (an :class:`export.methods.Network`) maps for one encoded photo."""
+    return float(cv.decode_maps(network(image))["specular"].mean())
+
+
+def study(log=print, model_dir=None):
     from export.files import shared_root
 
     train, gt_a, metal_a = _generated(*TRAIN)
@@ -175,9 +185,19 @@ def study(log=print):
     gt = np.array([float(m["specular"].mean()) for _, _, m in des])
     _report("Des19", predict(_matrix(rows)) > 0.5, rows, gt, gt > DES19_METAL, log)
     _report("  colour rule", colour(rows), rows, gt, gt > DES19_METAL, log)
+    network = None
+    if model_dir:
+        from export.methods import Network
+
+        network = Network(os.path.basename(os.path.normpath(model_dir)), model_dir, threads=1)
+        f0 = np.array([_network_f0(network, img.permute(1, 2, 0).numpy()) for _, img, _ in des])
+        metal = gt > DES19_METAL
+        log(f"network {network.name} on Des19: mean F0 {f0[~metal].min():.3f}-{f0[~metal].max():.3f} on the "
+            f"{int((~metal).sum())} dielectrics, {f0[metal].min():.3f}-{f0[metal].max():.3f} on the {int(metal.sum())} "
+            f"metals | |F0 error| {np.abs(gt - f0).mean():.4f} (F0 = 0.04 everywhere: {np.abs(gt - cv.DIELECTRIC_F0).mean():.4f})")
     from svbrdf_cli import ingest, pipeline, rectify
 
-    names, rows = [], []
+    names, rows, images = [], [], []
     for path in sorted(glob.glob(str(root / "data" / "real" / "**" / "*"), recursive=True)):
         if not path.lower().endswith((".jpg", ".jpeg", ".png")) or "reference_maps" in path:
             continue
@@ -186,7 +206,8 @@ def study(log=print):
         except Exception:  # noqa: BLE001 (a photo the crop refuses is left out of the count)
             continue
         names.append(os.path.relpath(path, root / "data" / "real"))
-        rows.append(features(pipeline.network_input(lin)))
+        images.append(pipeline.network_input(lin))
+        rows.append(features(images[-1]))
     p = predict(_matrix(rows))
     called = [(float(q), n, r["m1"]) for q, n, r in zip(p, names, rows) if q > 0.5]
     log(f"real photos: {len(called)} of {len(rows)} called metal (their F0 reading m1 in brackets):")
@@ -196,17 +217,25 @@ def study(log=print):
     log(f"real photos: {len(called)} of {len(rows)} called metal by the colour rule:")
     for n, m1 in called:
         log(f"  F0 {min(max(m1, cv.DIELECTRIC_F0), 1.0):.3f}  {n}")
+    if network is not None:
+        f0 = [(_network_f0(network, im), n) for im, n in zip(images, names)]
+        called = sorted((v, n) for v, n in f0 if v > NETWORK_CALL)
+        log(f"real photos: {len(called)} of {len(f0)} given a mean F0 above {NETWORK_CALL} by network {network.name}:")
+        for v, n in reversed(called):
+            log(f"  F0 {v:.3f}  {n}")
 
 
 @click.command()
-def cli():
+@click.option("--model-dir", type=click.Path(exists=True, file_okay=False), default=None,
+              help="Also an exported network's F0 on Des19 and the real photos (e.g. a training run's export).")
+def cli(model_dir):
     """Train the metal decision on generated photos; report it there, on Des19 and on the real photos."""
     import logging
     import warnings
 
     warnings.filterwarnings("ignore", category=RuntimeWarning)
     logging.getLogger("svbrdf").setLevel(logging.ERROR)  # the crop's per-photo advice
-    study(log=click.echo)
+    study(log=click.echo, model_dir=model_dir)
 
 
 if __name__ == "__main__":
