@@ -59,6 +59,11 @@ CLIPPED = cv.CLIPPED
 #: Pixels this close (a fraction of the width) to a clipped one are left out of the photo term
 #: (the edge of a clipped blob is partly clipped too).
 CLIP_MARGIN = 0.008
+#: Coarse levels take the full size's photo weight, averaged, rather than their own clipped mask.
+SOFT_LEVELS = True
+#: The photo term's weight rises from 0 to 1 between :data:`CLIP_MARGIN` and twice that from a clipped
+#: pixel (off: a hard edge at the margin, dilated with a square).
+CLIP_RAMP = True
 #: Width of the robust (Cauchy) loss on encoded residuals: residuals well under it count as
 #: squares, residuals well over it (a sparkle the model cannot make, a speck of dust) barely pull.
 ROBUST_WIDTH = 0.2
@@ -175,15 +180,21 @@ def _encode(r):
 
 
 def _unclipped(photo_lin):
-    """(H, W, 1) weight: 0 at clipped pixels and within :data:`CLIP_MARGIN` of one, else 1."""
+    """(H, W, 1) weight: 0 at clipped pixels and within :data:`CLIP_MARGIN` of one, rising to 1 over as
+    much again (:data:`CLIP_RAMP`; Euclidean distance: a round rim, not a square kernel's staircase)."""
     import cv2
 
     level = cv.clip_level(cv.image_to_encoded(photo_lin))  # (a clipped highlight the exposure darkened)
-    clipped = (photo_lin >= cv.image_to_linear(np.float32(CLIPPED * level))).any(-1).astype(np.uint8)
-    r = max(1, int(round(CLIP_MARGIN * photo_lin.shape[0])))
-    if clipped.any():
-        clipped = cv2.dilate(clipped, np.ones((2 * r + 1, 2 * r + 1), np.uint8))
-    return (1.0 - clipped)[..., None].astype(np.float32)
+    clipped = (photo_lin >= cv.image_to_linear(np.float32(CLIPPED * level))).any(-1)
+    r = max(1.0, CLIP_MARGIN * photo_lin.shape[0])
+    if not clipped.any():
+        return np.ones(photo_lin.shape[:2] + (1,), np.float32)
+    if not CLIP_RAMP:
+        k = int(round(r))
+        mask = cv2.dilate(clipped.astype(np.uint8), np.ones((2 * k + 1, 2 * k + 1), np.uint8))
+        return (1.0 - mask)[..., None].astype(np.float32)
+    dist = cv2.distanceTransform((~clipped).astype(np.uint8), cv2.DIST_L2, 5)
+    return np.clip((dist - r) / r, 0.0, 1.0)[..., None].astype(np.float32)
 
 
 def _smoothness(x):
@@ -213,9 +224,9 @@ def _maps(p):
 class _Problem:
     """The objective at one resolution: the photo term plus the priors around the start ``init``."""
 
-    def __init__(self, photo_lin, init, geometry, intensity, priors, full_side):
+    def __init__(self, photo_lin, init, geometry, intensity, priors, full_side, weight=None):
         side = photo_lin.shape[0]
-        self.weight = _unclipped(photo_lin)
+        self.weight = _unclipped(photo_lin) if weight is None else weight
         self.count = max(float(self.weight.sum()) * 3.0, 1.0)
         self.target = _encode(photo_lin)[0]
         self.init = dict(init, diffuse_lin=np.exp(init["diffuse"]))
@@ -397,7 +408,10 @@ def refine(image, stored, geometry, iterations=DEFAULT_ITERATIONS, priors=None, 
     plan[-1] = (side, iterations - sum(n for _, n in plan[:-1]))
     for s, steps in plan:
         init = {k: _resize(v, s) for k, v in start.items()}
-        prob = full if s == side else _Problem(_resize(photo, s), init, geometry, intensity, priors, side)
+        # a coarser level's weight is the full size's averaged (INTER_AREA): fractional at the clipped region's
+        # edge, not a mask of its own whose staircase of coarse pixels the finer levels inherit
+        prob = full if s == side else _Problem(_resize(photo, s), init, geometry, intensity, priors, side,
+                                               weight=_resize(full.weight, s) if SOFT_LEVELS else None)
         delta = {k: np.zeros_like(v) for k, v in init.items()} if delta is None else \
             {k: _resize(v, s) for k, v in delta.items()}
         tint = _tint(init["diffuse"])

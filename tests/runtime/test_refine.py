@@ -372,3 +372,18 @@ def test_what_the_photo_clipped_takes_the_surroundings_change():
     finally:
         refine.FILL_UNOBSERVED = True
     assert inside_off - 1.0 < 0.2 * (around - 1.0)  # without the fill the disc stays at the start's level
+
+
+def test_the_photo_weight_fades_in_round_a_clipped_pixel_over_a_round_rim():
+    side = 256
+    photo = np.full((side, side, 3), 0.2, np.float32)
+    photo[128, 128] = 1.0  # one clipped pixel
+    w = refine._unclipped(cv.image_to_linear(photo))[..., 0]
+    r = refine.CLIP_MARGIN * side
+    yy, xx = np.mgrid[:side, :side]
+    dist = np.hypot(yy - 128, xx - 128)
+    assert (w[dist <= r - 0.5] == 0).all() and (w[dist >= 2 * r + 1] == 1).all()
+    ramp = w[(dist > r + 0.5) & (dist < 2 * r - 0.5)]
+    assert ramp.size and ((ramp > 0) & (ramp < 1)).all()
+    # round, not a square kernel's: the corners of the square round the pixel are weighted
+    assert w[128 + int(r), 128 + int(r)] > 0
