@@ -387,3 +387,16 @@ def test_the_photo_weight_fades_in_round_a_clipped_pixel_over_a_round_rim():
     assert ramp.size and ((ramp > 0) & (ramp < 1)).all()
     # round, not a square kernel's: the corners of the square round the pixel are weighted
     assert w[128 + int(r), 128 + int(r)] > 0
+
+
+def test_the_fill_gives_the_clipped_region_its_surroundings_tilt_too():
+    side = 64
+    start = {"tilt": np.zeros((side, side, 2), np.float32), "diffuse": np.full((side, side, 3), np.log(0.3), np.float32),
+             "roughness": np.full((side, side, 1), 0.3, np.float32), "specular": np.full((side, side, 3), 0.04, np.float32)}
+    p = {k: v.copy() for k, v in start.items()}
+    p["tilt"][..., 0] = 0.1  # the fit tilted everything it saw...
+    unobserved = np.zeros((side, side), bool)
+    unobserved[24:40, 24:40] = True
+    p["tilt"][unobserved] = 0.0  # ...but not what the photo clipped
+    out = refine._fill_unobserved(start, p, unobserved)
+    assert np.allclose(out["tilt"][unobserved, 0], 0.1, atol=1e-3)  # no outline of the clipped region left
