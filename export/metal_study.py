@@ -56,15 +56,13 @@ def _hue(c):
     return 360.0 * colorsys.rgb_to_hsv(*(float(v) for v in c / max(float(c.max()), 1e-9)))[0]
 
 
-def highlight_colour(image):
-    """The highlight's colour against the rest of one encoded photo (H, W, 3): the mean linear colour of
-    the brightest 1 % of the unclipped pixels against that of the darker half. Returns a dict: ``hl_sat``
-    and ``lo_sat`` (their saturations), ``dhue`` (their hue difference, degrees) and ``outshines`` (the
-    highlight's luminance over the median's)."""
-    im = np.asarray(image, np.float32)
-    lin = cv.image_to_linear(im).astype(np.float32)
-    lum = ph._luma(lin)
-    ok = ~(im >= ph.CLIPPED).any(-1)
+def highlight_colour(lin, lum, clipped):
+    """The highlight's colour against the rest of one photo (its linear colours (H, W, 3), their luminance
+    and the clipped pixels, as :func:`features` has them): the mean linear colour of the brightest 1 % of
+    the unclipped pixels against that of the darker half. Returns a dict: ``hl_sat`` and ``lo_sat`` (their
+    saturations), ``dhue`` (their hue difference, degrees) and ``outshines`` (the highlight's luminance
+    over the median's)."""
+    ok = ~clipped
     if ok.sum() < 100:
         return {"hl_sat": 0.0, "lo_sat": 0.0, "dhue": 180.0, "outshines": 1.0}
     hi = ok & (lum >= np.quantile(lum[ok], 0.99))
@@ -119,7 +117,7 @@ def features(image, geo=None):
          "dsat": _saturation(ci) - _saturation(lin[outer].mean(0)), "rl": unb["r_l"], "rd": fd.roughness,
          "lres": np.log((unb["res_l"] + 1e-3) / (1.0 - fd.gain + 1e-3)), "lm1": np.log(unb["m1"] + 1e-3),
          "lp50": np.log(p50 + 1e-3), "contrast": np.log((p99 + 1e-3) / (p10 + 1e-3)), "m1": unb["m1"]}
-    f.update(highlight_colour(im))
+    f.update(highlight_colour(lin, lum, clipped))
     return {k: float(np.nan_to_num(v)) for k, v in f.items()}
 
 
@@ -206,8 +204,10 @@ def study(log=print, model_dir=None):
         except Exception:  # noqa: BLE001 (a photo the crop refuses is left out of the count)
             continue
         names.append(os.path.relpath(path, root / "data" / "real"))
-        images.append(pipeline.network_input(lin))
-        rows.append(features(images[-1]))
+        image = pipeline.network_input(lin)
+        rows.append(features(image))
+        if network is not None:  # (only then: 267 photos at 256 px are 200 MB)
+            images.append(image)
     p = predict(_matrix(rows))
     called = [(float(q), n, r["m1"]) for q, n, r in zip(p, names, rows) if q > 0.5]
     log(f"real photos: {len(called)} of {len(rows)} called metal (their F0 reading m1 in brackets):")

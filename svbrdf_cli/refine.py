@@ -356,12 +356,13 @@ def _project(p):
             p["specular"] = np.clip(p["specular"] + np.float32(short), *SPECULAR_RANGE)
 
 
-def fit_intensity(photo_lin, params, geometry):
-    """The light intensity that best reproduces the photo from ``params`` (least squares, unclipped pixels)."""
+def fit_intensity(photo_lin, params, geometry, weight=None):
+    """The light intensity that best reproduces the photo from ``params`` (least squares, unclipped pixels;
+    ``weight``: :func:`_unclipped` of the photo when the caller has it already)."""
     side = photo_lin.shape[0]
     light = shading.Lighting(side, side, geometry.light, geometry.camera, 1.0)
     r, _ = shading.render_with_gradient(*_maps(params), light)
-    ok = np.broadcast_to(_unclipped(photo_lin) > 0, r.shape)
+    ok = np.broadcast_to((_unclipped(photo_lin) if weight is None else weight) > 0, r.shape)
     num, den = float((r[ok] * photo_lin[ok]).sum()), float((r[ok] ** 2).sum())
     return num / den if den > 0 else cv.FLASH_INTENSITY
 
@@ -404,8 +405,9 @@ def refine(image, stored, geometry, iterations=DEFAULT_ITERATIONS, priors=None, 
     photo = cv.image_to_linear(np.asarray(image, np.float32)).astype(np.float32)
     side = photo.shape[0]
     start = _params({k: np.asarray(v, np.float32) for k, v in stored.items()})
-    intensity = fit_intensity(photo, start, geometry)
-    full = _Problem(photo, start, geometry, intensity, priors, side)
+    weight = _unclipped(photo)  # (once: the intensity's fit and the full-size problem share it)
+    intensity = fit_intensity(photo, start, geometry, weight)
+    full = _Problem(photo, start, geometry, intensity, priors, side, weight)
     loss_before = full.photo_loss(start)
     delta = None
     best, best_total, best_data = start, None, loss_before
