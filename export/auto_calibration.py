@@ -8,7 +8,7 @@ seed :data:`CALIBRATION_SEED`, which no training run uses) go through every
 installed tier; each tier's error is the re-rendering RMSE under 9 lights
 against the photo's ground truth (:func:`export.evaluate.relight_rmse`),
 its cost the median seconds per 256² image on this CPU. For each step up the
-ladder (tier i -> tier i + 1) and each signal of :data:`svbrdf_cli.auto_tier.SIGNALS`,
+ladder (tier i -> tier i + 1) and each signal of :data:`svbrdf_cli.infer.auto.SIGNALS`,
 every threshold is tried: photos whose signal is above it (or, the other
 candidate, below it) take the next tier.
 The rule kept is the *cheapest* whose mean error is within ``--margin``
@@ -35,11 +35,11 @@ import torch
 
 from export.evaluate import relight_rmse
 from export.files import command_errors, write_json
-from svbrdf_cli import auto_tier
+from svbrdf_cli.infer import auto as auto_tier
 from svbrdf_cli import conventions as cv
-from svbrdf_cli.capture_speed import median_seconds
+from export.studies.capture_speed import median_seconds
 from svbrdf_cli.errors import SvbrdfError
-from svbrdf_cli.mapset import stored_to_linear
+from svbrdf_cli.write.mapset import stored_to_linear
 
 #: The data engine's seed for calibration photos (training uses 0 and its per-stage streams, validation 1).
 CALIBRATION_SEED = 2468
@@ -154,7 +154,7 @@ def _cheapest(candidate):
 def calibrate(samples, chains=None, margin=MARGIN, repeat=5, log=print):
     """The rule for the installed tiers (cheapest first), from ``samples`` (see :func:`generated`)."""
     if chains is None:
-        from svbrdf_cli.models import load_model
+        from svbrdf_cli.infer.registry import load_model
 
         chains = {t: load_model(t) for t in auto_tier.available_tiers()}
     ladder = list(chains)

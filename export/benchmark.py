@@ -51,9 +51,9 @@ from export.evaluate import fit_intensity, load_des19, relight_rmse, score, scor
 from export.files import command_errors, shared_root
 from export.render.brdf import render_maps
 from svbrdf_cli import conventions as cv
-from svbrdf_cli.capture_speed import median_seconds
+from export.studies.capture_speed import median_seconds
 from svbrdf_cli.errors import SvbrdfError
-from svbrdf_cli.mapset import read_map_set, read_stored_maps, stored_to_linear
+from svbrdf_cli.write.mapset import read_map_set, read_stored_maps, stored_to_linear
 
 MAPS = cv.MAP_NAMES
 
@@ -100,7 +100,7 @@ class NineLights:
 
     def network_input(self):
         """Photo 00 as the tool feeds it to the networks (auto exposure)."""
-        from svbrdf_cli.pipeline import network_input
+        from svbrdf_cli.run.pipeline import network_input
 
         return network_input(cv.image_to_linear(self.photos[0]))
 
@@ -131,8 +131,8 @@ class NineLights:
 
 def timings(method, repeat=5, big=2048, seed=0):
     """Seconds per image: the method at 256², and a ``big``² crop through the capture path to ``big``² maps."""
-    from svbrdf_cli.pipeline import NETWORK_SIZE, auto_exposure_gain, network_input, resize, upsample_maps
-    from svbrdf_cli.ingest import encode_for_network
+    from svbrdf_cli.run.pipeline import NETWORK_SIZE, auto_exposure_gain, network_input, resize, upsample_maps
+    from svbrdf_cli.ingest.photo import encode_for_network
 
     rng = np.random.default_rng(seed)
     small = rng.random((NETWORK_SIZE, NETWORK_SIZE, 3), dtype=np.float32)
@@ -161,7 +161,7 @@ def _rank(x):
 def confidence_evidence(chain, samples):
     """Per map: Spearman correlation of (1 - confidence) with the per-pixel error, and the mean error
     of the least and most confident tenth of Des19's pixels (the chain's plain pass)."""
-    from svbrdf_cli import tta
+    from svbrdf_cli.infer import tta
 
     conf, err = {k: [] for k in MAPS}, {k: [] for k in MAPS}
     for _, photo, gt in samples:
@@ -291,8 +291,8 @@ def run(limit=None, repeat=5, figures="docs/figures", tables="docs/tables", stab
     log("paper  " + "  ".join(f"{k}={v:.4f}" for k, v in paper.items() if isinstance(v, float)))
     results = {"methods": rows, "samples": len(samples), "repeat": repeat, "cores": os.cpu_count()}
 
-    from svbrdf_cli.pipeline import network_input
-    from svbrdf_cli.models import DEFAULT_MODEL
+    from svbrdf_cli.run.pipeline import network_input
+    from svbrdf_cli.infer.registry import DEFAULT_MODEL
 
     by_name = {m.name: m for m in methods}  # the sessions loaded above serve every part below
     tier = DEFAULT_MODEL  # what svbrdf capture runs unless told otherwise

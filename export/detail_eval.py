@@ -49,8 +49,9 @@ def map_signal(name, stored):
 
 def ratios(photo_path, size, chain, model="physical", upsample="guided", refine=0):
     """{map: detail ratio} of one capture at ``size`` (None: the crop's own size, at most 1024) by
-    ``chain`` (:func:`svbrdf_cli.models.load_model` of ``model``)."""
-    from svbrdf_cli import ingest, pipeline
+    ``chain`` (:func:`svbrdf_cli.infer.registry.load_model` of ``model``)."""
+    from svbrdf_cli.ingest import photo as ingest
+    from svbrdf_cli.run import pipeline
     from svbrdf_cli.imageio import read_image
 
     opts = pipeline.Options(size=size, upsample=upsample, refine=refine, preview=False, force=True)
@@ -77,7 +78,7 @@ def real_photos(count=PHOTOS):
 
 
 def run(model="physical", upsample="guided", refine=0, log=print):
-    from svbrdf_cli.models import load_model
+    from svbrdf_cli.infer.registry import load_model
 
     chain = load_model(model, threads=1)  # one session for every photo
     rows = []

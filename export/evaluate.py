@@ -40,7 +40,7 @@ from export.render.brdf import render, render_maps
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.errors import SvbrdfError
 from svbrdf_cli.imageio import read_image
-from svbrdf_cli.mapset import read_map_set, write_map_set
+from svbrdf_cli.write.mapset import read_map_set, write_map_set
 
 MODES = ("full", "gt_masks", "gt_aux")
 #: Fixed relighting positions for the re-rendering RMSE (8 around + 1 centre, as in 9-light captures).
@@ -181,7 +181,7 @@ def evaluate(run=None, des19=None, out=None, modes=MODES, log=print, onnx=None, 
     if not os.path.isdir(des19):
         raise SvbrdfError(f"{des19}: Des19 validation samples not found (set SVBRDF_SHARED)")
     if onnx:
-        from svbrdf_cli.inference import Chain
+        from svbrdf_cli.infer.chain import Chain
 
         chain, modes = Chain(onnx), ("full",)
     else:

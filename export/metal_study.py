@@ -3,7 +3,7 @@
     python -m export.metal_study            # about 4 minutes on one core
     python -m export.metal_study --model-dir EXPORT   # and a trained network's F0 on the same photos
 
-The physical estimate (:mod:`svbrdf_cli.physical`) gives every photo the dielectric F0 = 0.04
+The physical estimate (:mod:`svbrdf_cli.infer.physical`) gives every photo the dielectric F0 = 0.04
 (``DETECT_METALS = False``). This study asks whether a calibrated decision over the fit's physical
 evidence would do better. Per photo it measures the evidence the flash fit yields (:func:`features`):
 the photo's dynamic range and brightness percentiles, its clipped share and colour, and three fits of
@@ -33,7 +33,7 @@ import click
 import numpy as np
 
 from svbrdf_cli import conventions as cv
-from svbrdf_cli import physical as ph
+from svbrdf_cli.infer import physical as ph
 
 #: Features the regression uses (:func:`features` names).
 NAMES = ("lp10", "lm0", "lc0", "p99", "clip", "sat", "dsat", "rl", "rd", "lres", "lm1", "lp50", "contrast")
@@ -193,7 +193,9 @@ def study(log=print, model_dir=None):
         log(f"network {network.name} on Des19: mean F0 {f0[~metal].min():.3f}-{f0[~metal].max():.3f} on the "
             f"{int((~metal).sum())} dielectrics, {f0[metal].min():.3f}-{f0[metal].max():.3f} on the {int(metal.sum())} "
             f"metals | |F0 error| {np.abs(gt - f0).mean():.4f} (F0 = 0.04 everywhere: {np.abs(gt - cv.DIELECTRIC_F0).mean():.4f})")
-    from svbrdf_cli import ingest, pipeline, rectify
+    from svbrdf_cli.ingest import photo as ingest
+    from svbrdf_cli.run import pipeline
+    from svbrdf_cli.rectify import crops as rectify
 
     names, rows, images = [], [], []
     for path in sorted(glob.glob(str(root / "data" / "real" / "**" / "*"), recursive=True)):

@@ -43,12 +43,12 @@ class Floor:
 
 
 class Physical:
-    """``--model physical``: the maps from the flash physics alone (:mod:`svbrdf_cli.physical`)."""
+    """``--model physical``: the maps from the flash physics alone (:mod:`svbrdf_cli.infer.physical`)."""
 
     name, label = "physical", "physical estimate (flash falloff, highlight fit, dielectric F0; no network)"
 
     def __init__(self):
-        from svbrdf_cli.physical import PhysicalModel
+        from svbrdf_cli.infer.physical import PhysicalModel
 
         self.chain = PhysicalModel()
 
@@ -58,10 +58,10 @@ class Physical:
 
 
 class Network:
-    """An exported model folder run by the runtime's :class:`svbrdf_cli.inference.Chain`."""
+    """An exported model folder run by the runtime's :class:`svbrdf_cli.infer.chain.Chain`."""
 
     def __init__(self, name, folder, label=None, threads=0):
-        from svbrdf_cli.inference import Chain
+        from svbrdf_cli.infer.chain import Chain
 
         self.name, self.label = name, label or name
         self.chain = Chain(folder, threads=threads)
@@ -72,12 +72,12 @@ class Network:
 
 
 class Auto:
-    """``--model auto`` (:class:`svbrdf_cli.auto_tier.AutoModel`) with the shipped rule."""
+    """``--model auto`` (:class:`svbrdf_cli.infer.auto.AutoModel`) with the shipped rule."""
 
     name, label = "auto", "auto (per photo, the cheapest tier the shipped rule finds good enough)"
 
     def __init__(self, rule, threads=0):
-        from svbrdf_cli.auto_tier import AutoModel
+        from svbrdf_cli.infer.auto import AutoModel
 
         self.model = AutoModel(rule, threads=threads)
 
@@ -87,10 +87,10 @@ class Auto:
 
 
 class Refined:
-    """``method`` followed by ``--refine`` (:func:`svbrdf_cli.refine.refine`) under the photo's estimated
+    """``method`` followed by ``--refine`` (:func:`svbrdf_cli.infer.refine.refine`) under the photo's estimated
     geometry, as ``svbrdf capture`` runs it on a photo without EXIF (the height from the physical
     estimate's falloff fit). ``timings`` collects the refinement's own seconds; ``priors``: a
-    :class:`svbrdf_cli.refine.Priors` (default weights when None)."""
+    :class:`svbrdf_cli.infer.refine.Priors` (default weights when None)."""
 
     def __init__(self, method, iterations, timings=None, priors=None):
         self.method, self.iterations, self.timings, self.priors = method, int(iterations), timings, priors
@@ -99,13 +99,14 @@ class Refined:
         self.chain = getattr(method, "chain", None)
 
     def _flash_height(self, image):
-        from svbrdf_cli.physical import estimate
+        from svbrdf_cli.infer.physical import estimate
 
         found = getattr(self.chain, "found", None) or estimate(image)[1]
         return found["flash_height"]
 
     def __call__(self, image):
-        from svbrdf_cli import geometry, refine
+        from svbrdf_cli.infer import geometry
+        from svbrdf_cli.infer import refine
 
         stored = self.method(image)
         geo = geometry.estimate(image, height=self._flash_height(image))
@@ -118,8 +119,8 @@ class Refined:
 
 def auto_rule():
     """The shipped ``--model auto`` rule, or None when it or a tier it needs is not installed."""
-    from svbrdf_cli.auto_tier import load_rule
-    from svbrdf_cli.inference import ModelError
+    from svbrdf_cli.infer.auto import load_rule
+    from svbrdf_cli.infer.chain import ModelError
 
     try:
         return load_rule()
@@ -131,11 +132,11 @@ def available(threads=0, refined=False):
     """Runnable methods, cheapest kind first: floor, the physical estimate (and, with ``refined``, the
     physical estimate with ``--refine``'s default steps: what ``svbrdf capture`` runs by default), the
     end-to-end baseline, every installed tier, auto."""
-    from svbrdf_cli.inference import MODELS_DIR, installed_tiers
+    from svbrdf_cli.infer.chain import MODELS_DIR, installed_tiers
 
     out = [Floor(), Physical()]
     if refined:
-        from svbrdf_cli.refine import DEFAULT_ITERATIONS
+        from svbrdf_cli.infer.refine import DEFAULT_ITERATIONS
 
         out.append(Refined(Physical(), DEFAULT_ITERATIONS))
     e2e = os.path.join(BASELINES_DIR, "e2e-fast")

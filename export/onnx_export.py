@@ -29,9 +29,9 @@ from torch import nn
 
 from export.nets.chain import VARIANTS
 from svbrdf_cli import conventions as cv
-from svbrdf_cli.inference import PHYSICAL_INPUT
+from svbrdf_cli.infer.chain import PHYSICAL_INPUT
 from svbrdf_cli.errors import SvbrdfError
-from svbrdf_cli.physical import PHYSICAL_VERSION
+from svbrdf_cli.infer.physical import PHYSICAL_VERSION
 
 OPSET = 19
 SIZE_MULTIPLE = 32

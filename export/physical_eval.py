@@ -1,4 +1,4 @@
-"""Calibration and checks of the physical estimate (:mod:`svbrdf_cli.physical`), never on validation ground truth
+"""Calibration and checks of the physical estimate (:mod:`svbrdf_cli.infer.physical`), never on validation ground truth
 except for the one documented convention fit.
 
     python -m export.physical_eval --fit-flash      # the Des19 inputs' flash power (conventions.FLASH_INTENSITY)
@@ -14,7 +14,7 @@ the ground truth.
 
 ``--normals`` draws photos from the training simulator (:mod:`export.data.dataset`, a fixed seed)
 and reports the normal RMSE of the physical estimate for a range of strengths; the shipped
-:data:`svbrdf_cli.physical.NORMAL_STRENGTH` is the best of them (a conservative single number).
+:data:`svbrdf_cli.infer.physical.NORMAL_STRENGTH` is the best of them (a conservative single number).
 """
 
 from __future__ import annotations
@@ -25,13 +25,13 @@ import click
 import numpy as np
 
 from svbrdf_cli import conventions as cv
-from svbrdf_cli import physical
+from svbrdf_cli.infer import physical
 
 
 def fit_flash(des19, log=print):
     """{sample: intensity} of the Des19 inputs (see the module doc) and their median."""
     from svbrdf_cli.imageio import read_image
-    from svbrdf_cli.mapset import read_map_set
+    from svbrdf_cli.write.mapset import read_map_set
     from svbrdf_cli.shading import render
 
     out = {}
@@ -93,11 +93,11 @@ def normal_sweep(strengths, count=64, log=print):
 def highlight_figure(photos, path, size=512, tile=256):
     """For each photo (cropped and exposed as ``svbrdf capture`` does it, at ``size``): the photo, the
     estimate's diffuse with the highlight taken off as the lobe's share alone, and with the colour
-    separation (:func:`svbrdf_cli.physical.separate_by_colour`, the shipped default)."""
+    separation (:func:`svbrdf_cli.infer.physical.separate_by_colour`, the shipped default)."""
     from export.render.figure import captioned_tile
-    from svbrdf_cli import ingest
+    from svbrdf_cli.ingest import photo as ingest
     from svbrdf_cli.imageio import write_image
-    from svbrdf_cli.pipeline import Options, prepare, resize
+    from svbrdf_cli.run.pipeline import Options, prepare, resize
 
     rows = []
     for photo in photos:

@@ -6,7 +6,7 @@
 For each method (:mod:`export.methods`) and each setting (no refinement, ``--refine N``):
 
 * **card_blue_9lights**: maps from photo 00 (the most frontal), the capture's geometry estimated
-  from that photo alone (:func:`svbrdf_cli.geometry.estimate`, no EXIF in these files), rendered
+  from that photo alone (:func:`svbrdf_cli.infer.geometry.estimate`, no EXIF in these files), rendered
   under the 8 other photos' known lights with one intensity fitted on photo 00
   (:meth:`export.benchmark.NineLights.relight_rmse`);
 * **Des19**: per-map RMSE by the reference scorer (``score_maps.py``, linear albedo), and the
@@ -40,8 +40,9 @@ from export.benchmark import NineLights, _chw
 from export.evaluate import load_des19, relight_rmse, render, score
 from export.files import command_errors, shared_root
 from svbrdf_cli import conventions as cv
-from svbrdf_cli import geometry, refine
-from svbrdf_cli.mapset import write_map_set
+from svbrdf_cli.infer import geometry
+from svbrdf_cli.infer import refine
+from svbrdf_cli.write.mapset import write_map_set
 
 #: Relighting lights for Des19: 9 on a ring around the flash (radius 1.2 at the camera's height, the
 #: first at 20 degrees), none where the input's flash was.
@@ -63,7 +64,7 @@ def generated_relight(method, samples):
     maps of (C, H, W))): the predicted maps re-rendered under :data:`HELD_OUT_LIGHTS` against the ground
     truth's, after one intensity fitted so that the two match under the input's flash (the estimate's
     albedo level is a convention, the data engine's exposure is not)."""
-    from svbrdf_cli.mapset import stored_to_linear
+    from svbrdf_cli.write.mapset import stored_to_linear
 
     flash = (0.0, 0.0, cv.CAMERA_HEIGHT)
     errs = []
@@ -77,14 +78,14 @@ def generated_relight(method, samples):
 
 
 def refined(method, iterations, timings=None, priors=None):
-    """``method`` followed by :func:`svbrdf_cli.refine.refine` under the photo's estimated geometry
-    (:class:`export.methods.Refined`, ``priors`` its :class:`svbrdf_cli.refine.Priors`); ``method`` itself
+    """``method`` followed by :func:`svbrdf_cli.infer.refine.refine` under the photo's estimated geometry
+    (:class:`export.methods.Refined`, ``priors`` its :class:`svbrdf_cli.infer.refine.Priors`); ``method`` itself
     when ``iterations`` is 0."""
     return method_zoo.Refined(method, iterations, timings, priors) if iterations else method
 
 
 def parse_priors(pairs):
-    """``("specular=10", ...)`` -> a :class:`svbrdf_cli.refine.Priors` with those weights changed (None if none)."""
+    """``("specular=10", ...)`` -> a :class:`svbrdf_cli.infer.refine.Priors` with those weights changed (None if none)."""
     if not pairs:
         return None
     names = {f.name for f in dataclasses.fields(refine.Priors)}
@@ -166,7 +167,7 @@ def figure(photos, path, iterations=refine.DEFAULT_ITERATIONS, tile=192, side_li
     estimate's and the refined diffuse, normal and roughness, and both rendered under a side light."""
     from export.render.figure import captioned_tile
     from svbrdf_cli.imageio import read_image, write_image
-    from svbrdf_cli.pipeline import network_input, resize
+    from svbrdf_cli.run.pipeline import network_input, resize
     from svbrdf_cli.shading import render_maps
 
     method = method_zoo.Physical()
@@ -204,7 +205,7 @@ def figure(photos, path, iterations=refine.DEFAULT_ITERATIONS, tile=192, side_li
 @click.option("--generated", default=0, show_default=True,
               help="Also the held-out relighting of N photos from the data engine (seed GENERATED_SEED).")
 @click.option("--prior", "prior_pairs", multiple=True, metavar="NAME=VALUE",
-              help="A --refine prior weight other than the default's (svbrdf_cli.refine.Priors), e.g. specular=10; "
+              help="A --refine prior weight other than the default's (svbrdf_cli.infer.refine.Priors), e.g. specular=10; "
                    "repeatable. The capture timings still run the default's.")
 def cli(methods, iterations, limit, repeat, json_out, figure_out, photos, extra, generated, prior_pairs):
     torch.set_num_threads(1)

@@ -6,7 +6,7 @@ the linear photo before the tool's own exposure and encoding (the path of
 ``svbrdf capture``), on the Des19 inputs and on real photos:
 
 * geometry: quarter turns and mirrors, undone on the maps afterwards (normal
-  vectors turned back, :mod:`svbrdf_cli.tta`);
+  vectors turned back, :mod:`svbrdf_cli.infer.tta`);
 * exposure +-1 EV (clipped at white), under-exposure (-4 EV then 8-bit
   quantised, as a dark JPEG) and over-exposure (+2 EV, clipped);
 * white balance shifted warm and cool; sensor noise (shot and read, a dim
@@ -32,9 +32,9 @@ import numpy as np
 from export.evaluate import score
 from export.render.brdf import render_maps
 from svbrdf_cli import conventions as cv
-from svbrdf_cli import tta
-from svbrdf_cli.pipeline import network_input
-from svbrdf_cli.mapset import stored_to_linear, write_map_set
+from svbrdf_cli.infer import tta
+from svbrdf_cli.run.pipeline import network_input
+from svbrdf_cli.write.mapset import stored_to_linear, write_map_set
 
 MAPS = cv.MAP_NAMES
 #: Real photos used (every n-th of the sorted list, so each collection is represented).
@@ -151,8 +151,9 @@ def real_photos(real_root, count=REAL_PHOTOS):
 
 def real_crops(real_root, count):
     """[(name, linear crop at network size)] of :func:`real_photos`, cropped as ``svbrdf capture`` does."""
-    from svbrdf_cli import ingest, rectify
-    from svbrdf_cli.pipeline import NETWORK_SIZE, resize
+    from svbrdf_cli.ingest import photo as ingest
+    from svbrdf_cli.rectify import crops as rectify
+    from svbrdf_cli.run.pipeline import NETWORK_SIZE, resize
 
     out = []
     for path in real_photos(real_root, count):

@@ -37,7 +37,7 @@ from export.nets.chain import (ALL_TIERS, NORMAL_LR_SCALE, STAGES, VARIANTS, bui
                                tier_variant)
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.errors import SvbrdfError
-from svbrdf_cli.physical import PHYSICAL_VERSION
+from svbrdf_cli.infer.physical import PHYSICAL_VERSION
 
 #: Ground truth each stage needs from the data engine.
 STAGE_TARGETS = {"masks": ("M_b", "M_h"), "aux": ("I_bf", "I_hr", "I_hr2"), "maps": ()}
@@ -61,7 +61,7 @@ class RunConfig:
     perceptual: bool = True
     val_samples: int = 16
     variant: str = "chain"   # or a Table IV ablation: "nomask", "e2e" (export.nets.chain.VARIANTS)
-    refine: bool = True      # the maps stage corrects the physical estimate (svbrdf_cli.physical)
+    refine: bool = True      # the maps stage corrects the physical estimate (svbrdf_cli.infer.physical)
     #: The level of the diffuse targets (see :func:`level_factor`): "convention", what the photo shows
     #: at the conventions' flash power (the physical estimate's reading), or "true", the material's own
     #: albedo (runs before session 12). F0 targets are the material's either way.
@@ -424,7 +424,7 @@ def load_trained(out, tier=None, device="cpu", stages=STAGES):
 @click.option("--shared", type=click.Path(file_okay=False), default=None,
               help="Shared data folder with materials/ (CC0 seeds); default ../shared/data.")
 @click.option("--refine/--no-refine", default=True, show_default=True,
-              help="The maps stage corrects the physical estimate (svbrdf_cli.physical) instead of predicting "
+              help="The maps stage corrects the physical estimate (svbrdf_cli.infer.physical) instead of predicting "
                    "maps from scratch.")
 @click.option("--variant", type=click.Choice(tuple(VARIANTS)), default=None,
               help="chain: the paper's model; nomask / e2e: Table IV ablations (aux without masks; "

@@ -5,7 +5,7 @@
 
 Ground-truth maps at ``--size`` are rendered into a flash photo with the
 runtime's renderer. Two low-resolution sources are upsampled back to
-``--size`` with each method of :func:`svbrdf_cli.pipeline.upsample_maps`:
+``--size`` with each method of :func:`svbrdf_cli.run.pipeline.upsample_maps`:
 
 * **ideal**: the ground truth area-downsampled to 256 (a perfect network),
   so only the upsampling is measured;
@@ -23,9 +23,9 @@ import time
 import click
 import numpy as np
 
-from svbrdf_cli import pipeline
+from svbrdf_cli.run import pipeline
 from svbrdf_cli import conventions as cv
-from svbrdf_cli.mapset import linear_to_stored
+from svbrdf_cli.write.mapset import linear_to_stored
 from svbrdf_cli.shading import render_maps
 
 METHODS = ("bicubic", "guided")
@@ -61,8 +61,8 @@ def cli(size, model, shared, limit):
     """Measure guided against bicubic upsampling of maps from 256 px."""
     chain = None
     if model:
-        from svbrdf_cli.inference import Chain
-        from svbrdf_cli.models import model_folder
+        from svbrdf_cli.infer.chain import Chain
+        from svbrdf_cli.infer.registry import model_folder
 
         chain = Chain(model_folder(model))
     sources = ("ideal", "network") if chain else ("ideal",)

@@ -125,7 +125,7 @@ def render_maps(maps, **kwargs):
 
 
 # --------------------------------------------------------------------------
-# The same rendering with its gradient (for svbrdf_cli.refine)
+# The same rendering with its gradient (for svbrdf_cli.infer.refine)
 # --------------------------------------------------------------------------
 
 class Lighting:

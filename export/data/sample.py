@@ -20,7 +20,7 @@ import os
 import numpy as np
 
 from export.data.cc0 import normals_from_height
-from svbrdf_cli.mapset import write_map_set
+from svbrdf_cli.write.mapset import write_map_set
 
 SAMPLE_DIR = os.path.join("examples", "glazed_tiles")
 SAMPLE_PHOTO = os.path.join("examples", "glazed_tiles.jpg")

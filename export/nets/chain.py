@@ -91,9 +91,9 @@ PHYSICAL_CHANNELS = 10
 
 
 def physical_input(photo):
-    """(B, 3, H, W) encoded photos -> (B, 10, H, W) physical estimates (:mod:`svbrdf_cli.physical`, numpy,
+    """(B, 3, H, W) encoded photos -> (B, 10, H, W) physical estimates (:mod:`svbrdf_cli.infer.physical`, numpy,
     no gradient), exactly what the runtime feeds an exported model's ``physical`` input."""
-    from svbrdf_cli.physical import network_input
+    from svbrdf_cli.infer.physical import network_input
 
     arr = photo.detach().float().permute(0, 2, 3, 1).cpu().numpy()
     return torch.from_numpy(np.stack([network_input(a) for a in arr])).permute(0, 3, 1, 2).to(photo)

@@ -4,10 +4,10 @@ import sys
 
 import click
 
-from svbrdf_cli.batch import PHOTO_EXTENSIONS, collect_inputs, run_local
+from svbrdf_cli.run.batch import PHOTO_EXTENSIONS, collect_inputs, run_local
 from svbrdf_cli.cli.options import capture_options, finish
-from svbrdf_cli.gallery import write_gallery
-from svbrdf_cli.ray_engine import is_uri
+from svbrdf_cli.write.gallery import write_gallery
+from svbrdf_cli.run.ray_engine import is_uri
 
 ENGINES = ("local", "ray")
 
@@ -45,7 +45,7 @@ def batch_cmd(folder, job, engine, address, workers):
     if engine == "ray":
         from tqdm import tqdm
 
-        from svbrdf_cli.ray_engine import run_ray
+        from svbrdf_cli.run.ray_engine import run_ray
 
         def err(msg):
             tqdm.write(f"error: {msg}", file=sys.stderr)

@@ -1,11 +1,11 @@
-"""``svbrdf capture``: photos in, texture sets out (:func:`svbrdf_cli.batch.run_local`).
+"""``svbrdf capture``: photos in, texture sets out (:func:`svbrdf_cli.run.batch.run_local`).
 
 Exit codes: 0 all done, 1 some inputs failed, 2 usage errors (click's).
 """
 
 import click
 
-from svbrdf_cli.batch import collect_inputs, run_local
+from svbrdf_cli.run.batch import collect_inputs, run_local
 from svbrdf_cli.cli.options import capture_options, finish
 
 

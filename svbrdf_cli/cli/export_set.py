@@ -3,7 +3,7 @@
 import click
 
 from svbrdf_cli.cli.options import bits_opt, check_format, force_opt, format_opt
-from svbrdf_cli.presets import PRESETS
+from svbrdf_cli.write.presets import PRESETS
 
 
 @click.command("export")
@@ -34,8 +34,8 @@ def export_cmd(mapset, output, preset, bits, fmt, force, no_ao, name):
       svbrdf export out/wood -o wood_gltf --preset gltf --bits 16
       svbrdf export out/wood -o wood_blend --preset blender --format exr --force
     """
-    from svbrdf_cli.mapset import read_map_set
-    from svbrdf_cli.presets import write_preset
+    from svbrdf_cli.write.mapset import read_map_set
+    from svbrdf_cli.write.presets import write_preset
 
     check_format(preset, fmt)
     maps = read_map_set(mapset)

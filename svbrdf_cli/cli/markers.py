@@ -3,7 +3,7 @@
 import click
 
 from svbrdf_cli.cli.options import force_opt, refuse_existing
-from svbrdf_cli.rectify import SHEET_CELL_PX, SHEET_CELL_PX_RANGE, SHEET_CELLS
+from svbrdf_cli.rectify.crops import SHEET_CELL_PX, SHEET_CELL_PX_RANGE, SHEET_CELLS
 
 
 @click.command("markers")
@@ -26,7 +26,7 @@ def markers_cmd(output, cell, force):
     import numpy as np
 
     from svbrdf_cli.imageio import write_image
-    from svbrdf_cli.rectify import marker_sheet
+    from svbrdf_cli.rectify.crops import marker_sheet
 
     refuse_existing(output, force)
     sheet = marker_sheet(cell)

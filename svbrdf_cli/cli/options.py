@@ -1,5 +1,5 @@
 """What the commands share: options (values parsed by :mod:`svbrdf_cli.cli.values`), verbosity, the
-``capture``/``batch`` options (built once into a :class:`svbrdf_cli.batch.Job`) and the end-of-run
+``capture``/``batch`` options (built once into a :class:`svbrdf_cli.run.batch.Job`) and the end-of-run
 summary. Every choice and limit is the library's."""
 
 import functools
@@ -10,14 +10,14 @@ import sys
 import click
 
 from svbrdf_cli import conventions as cv
-from svbrdf_cli.batch import Job
+from svbrdf_cli.run.batch import Job
 from svbrdf_cli.errors import OutputExistsError
-from svbrdf_cli.models import DEFAULT_MODEL
+from svbrdf_cli.infer.registry import DEFAULT_MODEL
 from svbrdf_cli.cli.values import corners, exposure, light, numbers
-from svbrdf_cli.pipeline import MAX_SIZE, MIN_SIZE, UPSAMPLE_METHODS, Options
-from svbrdf_cli.presets import FORMATS, PNG_BITS, PNG_ONLY_PRESETS, PRESETS
-from svbrdf_cli.rectify import CROP_MODES
-from svbrdf_cli.refine import DEFAULT_ITERATIONS, MAX_ITERATIONS
+from svbrdf_cli.run.pipeline import MAX_SIZE, MIN_SIZE, UPSAMPLE_METHODS, Options
+from svbrdf_cli.write.presets import FORMATS, PNG_BITS, PNG_ONLY_PRESETS, PRESETS
+from svbrdf_cli.rectify.crops import CROP_MODES
+from svbrdf_cli.infer.refine import DEFAULT_ITERATIONS, MAX_ITERATIONS
 
 
 def set_verbosity(quiet=False, verbose=0):
@@ -115,7 +115,7 @@ _CAPTURE_OPTIONS = [
 
 def capture_options(f):
     """The options ``capture`` and ``batch`` share, handed to the command as one ``job``
-    (:class:`svbrdf_cli.batch.Job`); verbosity is set before the command runs."""
+    (:class:`svbrdf_cli.run.batch.Job`); verbosity is set before the command runs."""
     @functools.wraps(f)
     def command(*args, output, model, preset, crop, corners, size, exposure, white_balance, upsample, bits, fmt,
                 debug, confidence, no_preview, no_ao, tileable, refine, threads, force, name, quiet, verbose, **kwargs):

@@ -30,7 +30,7 @@ def render_cmd(maps, output, light, intensity, exposure, force):
     """
     from svbrdf_cli import conventions as cv
     from svbrdf_cli.imageio import write_image
-    from svbrdf_cli.mapset import read_map_set
+    from svbrdf_cli.write.mapset import read_map_set
     from svbrdf_cli.shading import render_maps
 
     refuse_existing(output, force)

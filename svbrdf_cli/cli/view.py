@@ -24,7 +24,7 @@ def view_cmd(mapset, size, open_):
     """
     import webbrowser
 
-    from svbrdf_cli.viewer import write_viewer
+    from svbrdf_cli.write.viewer import write_viewer
 
     path = write_viewer(mapset, size)
     click.echo(f"wrote {path}", err=True)

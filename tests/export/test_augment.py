@@ -136,8 +136,8 @@ def test_hsv_round_trip():
 
 
 def test_runtime_tta_transforms_match_the_training_augmentation():
-    """svbrdf_cli.tta (numpy, the runtime) turns normals exactly as export.data.augment (torch) does."""
-    from svbrdf_cli import tta
+    """svbrdf_cli.infer.tta (numpy, the runtime) turns normals exactly as export.data.augment (torch) does."""
+    from svbrdf_cli.infer import tta
 
     g = torch.Generator().manual_seed(3)
     n = cv.normalize(torch.randn(1, 3, 8, 8, generator=g) + torch.tensor([0, 0, 2.0]).reshape(1, 3, 1, 1), axis=1)

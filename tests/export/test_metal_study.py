@@ -4,7 +4,7 @@ import numpy as np
 
 from export import metal_study
 from svbrdf_cli import conventions as cv
-from svbrdf_cli import physical as ph
+from svbrdf_cli.infer import physical as ph
 
 
 def _photo(diffuse, f0, roughness=0.3, size=128):

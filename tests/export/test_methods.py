@@ -7,8 +7,8 @@ import pytest
 
 from export import methods as method_zoo
 from svbrdf_cli import conventions as cv
-from svbrdf_cli.inference import MODELS_DIR, Chain, ModelError, installed_tiers
-from svbrdf_cli.physical import PhysicalModel
+from svbrdf_cli.infer.chain import MODELS_DIR, Chain, ModelError, installed_tiers
+from svbrdf_cli.infer.physical import PhysicalModel
 
 
 def _photo(h=24, w=32, seed=0):
@@ -39,7 +39,7 @@ def test_floor_maps_are_writable_copies():
 
 
 def test_physical_returns_only_the_four_maps():
-    from svbrdf_cli.physical import PhysicalModel
+    from svbrdf_cli.infer.physical import PhysicalModel
 
     x = _photo(48, 48)
     maps = method_zoo.Physical()(x)
@@ -66,7 +66,7 @@ def test_network_runs_the_runtime_chain_and_keeps_the_maps(tier):
 
 
 def test_auto_rule_is_none_only_when_the_rule_cannot_be_loaded(monkeypatch):
-    from svbrdf_cli import auto_tier
+    from svbrdf_cli.infer import auto as auto_tier
     def missing():
         raise ModelError("no rule")
 

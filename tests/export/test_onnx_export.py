@@ -68,10 +68,10 @@ def test_float16_storage_halves_the_file_and_keeps_the_numbers(tmp_path):
 
 
 def test_runtime_chain_matches_torch(tmp_path):
-    """svbrdf_cli.inference.Chain (onnxruntime only) reproduces the torch chain, padding and the
+    """svbrdf_cli.infer.chain.Chain (onnxruntime only) reproduces the torch chain, padding and the
     physical estimate it refines included."""
-    from svbrdf_cli.inference import BORDER_MARGIN, Chain
-    from svbrdf_cli.physical import network_input
+    from svbrdf_cli.infer.chain import BORDER_MARGIN, Chain
+    from svbrdf_cli.infer.physical import network_input
 
     torch.manual_seed(0)
     net = _net()
@@ -93,7 +93,7 @@ def test_runtime_chain_matches_torch(tmp_path):
 def test_runtime_chain_refuses_other_conventions(tmp_path):
     import onnx
 
-    from svbrdf_cli.inference import Chain, ModelError
+    from svbrdf_cli.infer.chain import Chain, ModelError
 
     net = _net()
     for stage in IO:
@@ -127,7 +127,7 @@ def test_int8_weights_stay_close(tmp_path):
 
 def test_end_to_end_baseline_exports_with_the_photo_only(tmp_path):
     from export.nets.chain import EndToEndNet
-    from svbrdf_cli.inference import BORDER_MARGIN, Chain
+    from svbrdf_cli.infer.chain import BORDER_MARGIN, Chain
 
     torch.manual_seed(0)
     net = EndToEndNet("fast", base=8, depth=3, refine=False).eval()
@@ -146,8 +146,8 @@ def test_untrained_refining_models_return_the_physical_estimate(tmp_path):
     """A freshly initialised chain and end-to-end net, exported and run by the runtime, give the
     physical estimate back: weak networks cannot make the maps worse than physics by noise."""
     from export.nets.chain import EndToEndNet
-    from svbrdf_cli.inference import Chain
-    from svbrdf_cli.physical import estimate
+    from svbrdf_cli.infer.chain import Chain
+    from svbrdf_cli.infer.physical import estimate
 
     torch.manual_seed(0)
     img = np.random.default_rng(5).random((64, 64, 3), dtype=np.float32) * 0.6

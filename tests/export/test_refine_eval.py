@@ -4,7 +4,7 @@ import click
 import pytest
 
 from export.refine_eval import parse_priors
-from svbrdf_cli import refine
+from svbrdf_cli.infer import refine
 
 
 def test_no_prior_given_keeps_the_defaults():

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from svbrdf_cli import atomic
+from svbrdf_cli.write import atomic
 from svbrdf_cli.cli.main import cli
 from svbrdf_cli.errors import ImageWriteError
 from svbrdf_cli.imageio import write_image

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from svbrdf_cli import auto_tier
+from svbrdf_cli.infer import auto as auto_tier
 from svbrdf_cli import conventions as cv
-from svbrdf_cli.inference import ModelError, installed_tiers
+from svbrdf_cli.infer.chain import ModelError, installed_tiers
 
 LADDER = [t for t in ("lite", "fast") if t in installed_tiers()]
 needs_two = pytest.mark.skipif(len(LADDER) < 2, reason="auto needs the lite and fast tiers installed")
@@ -107,7 +107,7 @@ def test_capture_with_model_auto_records_the_tier_and_why(tmp_path):
 
 @pytest.mark.parametrize("threshold,chosen", [(None, 0), (-1.0, 1)])
 def test_the_ladder_starts_with_the_physical_estimate(threshold, chosen, tmp_path):
-    from svbrdf_cli.physical import PhysicalModel
+    from svbrdf_cli.infer.physical import PhysicalModel
 
     if not installed_tiers():
         pytest.skip("no network tier installed to step up to")

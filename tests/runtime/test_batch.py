@@ -2,7 +2,8 @@
 
 import os
 
-from svbrdf_cli import batch, pipeline
+from svbrdf_cli.run import batch
+from svbrdf_cli.run import pipeline
 from svbrdf_cli.errors import ImageReadError
 
 

@@ -446,7 +446,7 @@ def _(t):
 
 
 def _mapset(t):
-    from svbrdf_cli.mapset import write_map_set
+    from svbrdf_cli.write.mapset import write_map_set
 
     h = w = 32
     maps = {"normal": np.broadcast_to(np.float32([0, 0, 1]), (h, w, 3)), "diffuse": np.full((h, w, 3), 0.3, np.float32),

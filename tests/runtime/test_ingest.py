@@ -4,7 +4,7 @@ import pytest
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.errors import ImageReadError
 from svbrdf_cli.imageio import write_image
-from svbrdf_cli.ingest import load_photo
+from svbrdf_cli.ingest.photo import load_photo
 
 
 def _write_oriented_jpeg(path, img, orientation):

@@ -7,7 +7,7 @@ import os
 import numpy as np
 import pytest
 
-from svbrdf_cli.inference import MODELS_DIR, STAGES, Chain, installed_tiers
+from svbrdf_cli.infer.chain import MODELS_DIR, STAGES, Chain, installed_tiers
 
 MB = 1_000_000
 
@@ -63,7 +63,7 @@ def test_provenance_matches_the_files(tier):
 
 
 def test_the_auto_rule_is_shipped_calibrated_for_the_installed_tiers():
-    from svbrdf_cli.auto_tier import SIGNALS, available_tiers, load_rule
+    from svbrdf_cli.infer.auto import SIGNALS, available_tiers, load_rule
 
     rule = load_rule()  # raises when a tier it steps between is missing
     # the physical estimate first, then the networks, cheapest first

@@ -1,10 +1,10 @@
-"""The physical estimate (svbrdf_cli.physical) on constructed photos whose maps are known."""
+"""The physical estimate (svbrdf_cli.infer.physical) on constructed photos whose maps are known."""
 
 import numpy as np
 import pytest
 
 from svbrdf_cli import conventions as cv
-from svbrdf_cli import physical
+from svbrdf_cli.infer import physical
 from svbrdf_cli.shading import render
 
 SIZE = 128
@@ -120,7 +120,7 @@ def test_extreme_inputs_stay_finite():
 
 
 def test_model_interface_matches_the_chain():
-    from svbrdf_cli.models import DEFAULT_MODEL, check_model, load_model
+    from svbrdf_cli.infer.registry import DEFAULT_MODEL, check_model, load_model
 
     assert DEFAULT_MODEL == "physical"
     check_model("physical")

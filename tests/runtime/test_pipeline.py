@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from svbrdf_cli import pipeline
+from svbrdf_cli.run import pipeline
 from svbrdf_cli import conventions as cv
 
 

@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 from svbrdf_cli import conventions as cv
-from svbrdf_cli import imageio, mapset, presets
+from svbrdf_cli import imageio
+from svbrdf_cli.write import mapset
+from svbrdf_cli.write import presets
 from svbrdf_cli.errors import ImageWriteError
 from svbrdf_cli.imageio import read_image
 

@@ -9,8 +9,8 @@ from click.testing import CliRunner
 
 from svbrdf_cli.cli.main import cli
 from svbrdf_cli.imageio import read_image, write_image
-from svbrdf_cli.inference import installed_tiers
-from svbrdf_cli.models import DEFAULT_MODEL
+from svbrdf_cli.infer.chain import installed_tiers
+from svbrdf_cli.infer.registry import DEFAULT_MODEL
 
 ray = pytest.importorskip("ray", reason="the scale extra (Ray) is not installed")
 pytestmark = pytest.mark.skipif("fast" not in installed_tiers(), reason="the fast model is not installed")

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from svbrdf_cli import rectify
+from svbrdf_cli.rectify import crops as rectify
 
 CELL = 64
 

@@ -1,5 +1,5 @@
-"""Test-time refinement (svbrdf_cli.refine), its renderer's gradient (svbrdf_cli.shading) and the
-capture geometry (svbrdf_cli.geometry)."""
+"""Test-time refinement (svbrdf_cli.infer.refine), its renderer's gradient (svbrdf_cli.shading) and the
+capture geometry (svbrdf_cli.infer.geometry)."""
 
 import math
 
@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 from svbrdf_cli import conventions as cv
-from svbrdf_cli import geometry, refine, shading
+from svbrdf_cli import shading
+from svbrdf_cli.infer import geometry
+from svbrdf_cli.infer import refine
 
 
 def _random_maps(rng, size, dtype=np.float64):

@@ -74,7 +74,7 @@ def test_png_encoder_writes_openimageio_pixels(tmp_path, monkeypatch, isal):
 def test_jpeg_decoded_as_openimageio_decodes_it():
     """The bundled sample through OpenCV's decoder and the sRGB table: exactly OpenImageIO's float
     decoding followed by the sRGB formula."""
-    from svbrdf_cli.ingest import load_photo
+    from svbrdf_cli.ingest.photo import load_photo
 
     fast = load_photo(SAMPLE).linear
     slow = cv.srgb_to_linear(read_image(SAMPLE)).astype(np.float32)

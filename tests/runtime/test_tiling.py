@@ -3,7 +3,7 @@
 import numpy as np
 
 from svbrdf_cli import conventions as cv
-from svbrdf_cli.tiling import make_tileable, weights, wrap_ratio
+from svbrdf_cli.write.tiling import make_tileable, weights, wrap_ratio
 
 
 def _maps(n=128, seed=0):

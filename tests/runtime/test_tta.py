@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from svbrdf_cli import conventions as cv
-from svbrdf_cli import tta
+from svbrdf_cli.infer import tta
 
 
 def _maps(seed=0, n=12):

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from svbrdf_cli.imageio import write_image
-from svbrdf_cli.inference import installed_tiers
+from svbrdf_cli.infer.chain import installed_tiers
 
 from .clitools import make_photo, run
 

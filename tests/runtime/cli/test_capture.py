@@ -8,8 +8,8 @@ import pytest
 
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.imageio import read_image
-from svbrdf_cli.inference import installed_tiers
-from svbrdf_cli.models import DEFAULT_MODEL
+from svbrdf_cli.infer.chain import installed_tiers
+from svbrdf_cli.infer.registry import DEFAULT_MODEL
 
 from .clitools import SAMPLE, make_photo, run
 
@@ -127,7 +127,7 @@ def test_name_sets_the_engine_file_names_of_one_capture(tmp_path):
 
 
 def test_tileable_capture(tmp_path):
-    from svbrdf_cli.tiling import wrap_ratio
+    from svbrdf_cli.write.tiling import wrap_ratio
 
     from svbrdf_cli.imageio import write_image
 
@@ -156,7 +156,7 @@ def test_refine_records_geometry_and_fit(tmp_path):
     for k in ("normal", "diffuse", "roughness", "specular"):
         assert np.isfinite(read_image(tmp_path / "r" / "plaster" / f"{k}.png")).all()
     # --refine alone, or nothing, takes the default number of steps; --refine 0 records nothing
-    from svbrdf_cli.refine import DEFAULT_ITERATIONS
+    from svbrdf_cli.infer.refine import DEFAULT_ITERATIONS
 
     for i, extra in enumerate((["--refine"], [])):
         code, out = run("capture", photo, "-o", tmp_path / f"d{i}", "--size", 256, *extra)
@@ -169,7 +169,7 @@ def test_refine_records_geometry_and_fit(tmp_path):
 
 
 def test_refine_rejects_counts_out_of_range(tmp_path):
-    from svbrdf_cli.refine import MAX_ITERATIONS
+    from svbrdf_cli.infer.refine import MAX_ITERATIONS
 
     code, out = run("capture", SAMPLE, "-o", tmp_path / "x", "--refine", MAX_ITERATIONS + 1)
     assert code == 2 and "--refine" in out and not (tmp_path / "x").exists()

@@ -5,7 +5,7 @@ import os
 import numpy as np
 
 from svbrdf_cli import conventions as cv
-from svbrdf_cli import mapset
+from svbrdf_cli.write import mapset
 from svbrdf_cli.imageio import read_image
 
 from .clitools import run

@@ -5,7 +5,7 @@ from click.testing import CliRunner
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.cli.main import cli
 from svbrdf_cli.imageio import read_image
-from svbrdf_cli.mapset import read_map_set, write_map_set
+from svbrdf_cli.write.mapset import read_map_set, write_map_set
 from svbrdf_cli.shading import render_maps
 
 

@@ -9,7 +9,7 @@ import pytest
 
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.imageio import read_image
-from svbrdf_cli.mapset import read_map_set, write_map_set
+from svbrdf_cli.write.mapset import read_map_set, write_map_set
 from svbrdf_cli.shading import render_maps
 
 from .clitools import run

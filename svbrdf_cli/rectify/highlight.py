@@ -4,7 +4,7 @@ A dielectric's highlight adds the flash's (white) light to every channel, while 
 texture is bright in some channels only, so the blob is read on the weakest channel rather than the
 luminance (measured on card_blue_9lights, whose gold foil scales are the brightest thing in the photo
 by luminance: the centre lands 0.127 from the camera's foot instead of 0.163). Used by
-:mod:`svbrdf_cli.geometry` (where the camera and flash were) and :mod:`svbrdf_cli.physical` (what of
+:mod:`svbrdf_cli.infer.geometry` (where the camera and flash were) and :mod:`svbrdf_cli.infer.physical` (what of
 the highlight is left in the diffuse).
 """
 

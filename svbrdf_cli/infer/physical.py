@@ -36,7 +36,7 @@ validation input comes, to be lit by the flash power
 :data:`svbrdf_cli.conventions.FLASH_INTENSITY`: the one power that reproduces the Des19
 validation inputs from their maps (a convention of the data, see ``docs/conventions.md``).
 
-:class:`PhysicalModel` has the call interface of :class:`svbrdf_cli.inference.Chain`, so
+:class:`PhysicalModel` has the call interface of :class:`svbrdf_cli.infer.chain.Chain`, so
 ``svbrdf capture --model physical`` and the benchmarks run it like any model.
 """
 
@@ -49,7 +49,7 @@ import types
 import numpy as np
 
 from svbrdf_cli import conventions as cv
-from svbrdf_cli import highlight
+from svbrdf_cli.rectify import highlight
 
 #: Bumped whenever the estimate's output changes: a network trained to refine one version
 #: must be fed that version (written into exported models and checked when they load).
@@ -503,7 +503,7 @@ def separate_by_colour(lin, share, tint, unreliable, reference=None):
 
 def highlight_residue(diffuse, blob):
     """(H, W) bool: the highlight left in ``diffuse`` at the photo's highlight (``blob``:
-    :func:`svbrdf_cli.highlight.find`): the bright connected patch of the diffuse that holds the blob's
+    :func:`svbrdf_cli.rectify.highlight.find`): the bright connected patch of the diffuse that holds the blob's
     peak, stands :data:`RESIDUE_LEVEL` above the level of the diffuse round the blob and is whiter
     than the material elsewhere by :data:`RESIDUE_WHITENING` (weakest over strongest channel). A highlight
     sharper than the fitted lobe (a clear coat over a rough base: two lobes where the fit has one) keeps
@@ -707,7 +707,7 @@ def network_input(image):
 
 
 class PhysicalModel:
-    """``--model physical``: :func:`estimate` behind :class:`svbrdf_cli.inference.Chain`'s interface."""
+    """``--model physical``: :func:`estimate` behind :class:`svbrdf_cli.infer.chain.Chain`'s interface."""
 
     tier = "physical"
     stages = ()
@@ -724,7 +724,7 @@ class PhysicalModel:
         return self
 
     def describe(self):
-        return {"tier": self.tier, "method": "physical estimate (svbrdf_cli.physical)", "found": self.found}
+        return {"tier": self.tier, "method": "physical estimate (svbrdf_cli.infer.physical)", "found": self.found}
 
     def __call__(self, image):
         t0 = time.perf_counter()

@@ -18,7 +18,7 @@ import json
 import os
 
 from svbrdf_cli import conventions as cv
-from svbrdf_cli.atomic import write_text
+from svbrdf_cli.write.atomic import write_text
 from svbrdf_cli.errors import MapSetError
 
 #: The viewer's file name in the set's folder.

@@ -1,24 +1,24 @@
 """What ``--model`` names, ready to run.
 
-``--model`` is ``physical`` (the maps computed from the flash physics, :mod:`svbrdf_cli.physical`), a
-shipped tier (:data:`svbrdf_cli.inference.TIERS`), ``auto`` (per photo, the cheapest tier good
-enough for it, :mod:`svbrdf_cli.auto_tier`) or a folder of exported models. Everything that runs
+``--model`` is ``physical`` (the maps computed from the flash physics, :mod:`svbrdf_cli.infer.physical`), a
+shipped tier (:data:`svbrdf_cli.infer.chain.TIERS`), ``auto`` (per photo, the cheapest tier good
+enough for it, :mod:`svbrdf_cli.infer.auto`) or a folder of exported models. Everything that runs
 maps (the local batch, the Ray workers, the speed benchmark) loads them here, so that neither
-:mod:`svbrdf_cli.inference` nor :mod:`svbrdf_cli.auto_tier` has to know the other.
+:mod:`svbrdf_cli.infer.chain` nor :mod:`svbrdf_cli.infer.auto` has to know the other.
 """
 
 from __future__ import annotations
 
 import os
 
-from svbrdf_cli.inference import MODELS_DIR, TIERS, Chain, ModelError, installed_tiers
+from svbrdf_cli.infer.chain import MODELS_DIR, TIERS, Chain, ModelError, installed_tiers
 
-#: ``--model physical``: the maps computed from the flash physics alone (:mod:`svbrdf_cli.physical`).
+#: ``--model physical``: the maps computed from the flash physics alone (:mod:`svbrdf_cli.infer.physical`).
 PHYSICAL = "physical"
 #: What ``svbrdf capture`` runs without ``--model``: the physical estimate, until a trained
 #: model beats it on Des19 (every map) and on the real 9-light card (docs/benchmarks.md).
 DEFAULT_MODEL = PHYSICAL
-#: ``--model auto``: per photo, the cheapest installed tier good enough for it (:mod:`svbrdf_cli.auto_tier`).
+#: ``--model auto``: per photo, the cheapest installed tier good enough for it (:mod:`svbrdf_cli.infer.auto`).
 AUTO = "auto"
 
 
@@ -37,25 +37,25 @@ def model_folder(model):
 
 
 def load_model(model, threads=0):
-    """What ``--model`` names, ready to run: a :class:`svbrdf_cli.inference.Chain`, or for ``auto`` an
-    :class:`svbrdf_cli.auto_tier.AutoModel`, for ``physical`` a
-    :class:`svbrdf_cli.physical.PhysicalModel` (same call interface)."""
+    """What ``--model`` names, ready to run: a :class:`svbrdf_cli.infer.chain.Chain`, or for ``auto`` an
+    :class:`svbrdf_cli.infer.auto.AutoModel`, for ``physical`` a
+    :class:`svbrdf_cli.infer.physical.PhysicalModel` (same call interface)."""
     if model == AUTO:
-        from svbrdf_cli.auto_tier import AutoModel
+        from svbrdf_cli.infer.auto import AutoModel
 
         return AutoModel(threads=threads)
     if model == PHYSICAL:
-        from svbrdf_cli.physical import PhysicalModel
+        from svbrdf_cli.infer.physical import PhysicalModel
 
         return PhysicalModel()
     return Chain(model_folder(model), threads=threads)
 
 
 def check_model(model):
-    """Raise :class:`svbrdf_cli.inference.ModelError` now if ``model`` cannot be loaded (cheap: no
+    """Raise :class:`svbrdf_cli.infer.chain.ModelError` now if ``model`` cannot be loaded (cheap: no
     session is made)."""
     if model == AUTO:
-        from svbrdf_cli.auto_tier import load_rule
+        from svbrdf_cli.infer.auto import load_rule
 
         load_rule()
     elif model != PHYSICAL:

@@ -1,9 +1,9 @@
 """The batch engine: photos in, texture sets out, one bad photo never stopping the rest.
 
 ``svbrdf capture`` and ``svbrdf batch`` (local engine) run :func:`run_local`; the Ray engine
-(:mod:`svbrdf_cli.ray_engine`) plans its work with the same :func:`plan_inputs` and reports
+(:mod:`svbrdf_cli.run.ray_engine`) plans its work with the same :func:`plan_inputs` and reports
 failures with the same :func:`describe_failure`. Each photo is read, cropped and exposed while the
-previous one is in the model, and written as one atomic set (:func:`svbrdf_cli.pipeline.infer_set`)
+previous one is in the model, and written as one atomic set (:func:`svbrdf_cli.run.pipeline.infer_set`)
 on a thread of its own while the next one is in the model; a bad photo is reported in one line
 and skipped.
 """
@@ -18,10 +18,10 @@ import sys
 import time
 from typing import NamedTuple
 
-from svbrdf_cli import pipeline
-from svbrdf_cli.atomic import clean_partials
+from svbrdf_cli.run import pipeline
+from svbrdf_cli.write.atomic import clean_partials
 from svbrdf_cli.errors import SvbrdfError
-from svbrdf_cli.models import DEFAULT_MODEL
+from svbrdf_cli.infer.registry import DEFAULT_MODEL
 
 log = logging.getLogger("svbrdf")
 
@@ -32,7 +32,7 @@ PHOTO_EXTENSIONS = frozenset(".jpg .jpeg .png .tif .tiff .exr .webp".split())
 @dataclasses.dataclass
 class Job:
     """One run of ``capture`` or ``batch``: where the sets go, which model makes them, and how each
-    photo is processed (:class:`svbrdf_cli.pipeline.Options`)."""
+    photo is processed (:class:`svbrdf_cli.run.pipeline.Options`)."""
 
     output: str
     opts: pipeline.Options = dataclasses.field(default_factory=pipeline.Options)
@@ -52,7 +52,7 @@ class Counts(NamedTuple):
 
 def photo_extensions():
     """Extensions a folder input contributes: :data:`PHOTO_EXTENSIONS` and camera RAW."""
-    from svbrdf_cli.ingest import RAW_EXTENSIONS
+    from svbrdf_cli.ingest.photo import RAW_EXTENSIONS
 
     return PHOTO_EXTENSIONS | RAW_EXTENSIONS
 
@@ -123,7 +123,7 @@ def run_local(files, job, failures=None):
     from tqdm import tqdm
     from tqdm.contrib.logging import logging_redirect_tqdm
 
-    from svbrdf_cli.models import load_model
+    from svbrdf_cli.infer.registry import load_model
 
     def err(msg):
         tqdm.write(f"error: {msg}", file=sys.stderr)  # above the progress bar, never inside it

@@ -26,7 +26,7 @@ STAGES = ("masks", "aux", "maps")
 BORDER_MARGIN = 32
 
 #: Shipped model sets live here, one folder per tier.
-MODELS_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "models")
+MODELS_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "models")
 #: Tiers, cheapest first: ``lite`` is one end-to-end UNet (maps.onnx only), the others the three-stage chain.
 TIERS = ("lite", "fast", "balanced", "best")
 #: The extra network input of models that refine the physical estimate: its four stored maps
@@ -85,7 +85,7 @@ class Chain:
                 raise ModelError(f"'{path}' was made for conventions version {meta.get('conventions')!r}, "
                                  f"this tool uses {cv.CONVENTIONS_VERSION!r}; re-export it.")
             if PHYSICAL_INPUT in meta.get("inputs", "").split(","):
-                from svbrdf_cli.physical import PHYSICAL_VERSION
+                from svbrdf_cli.infer.physical import PHYSICAL_VERSION
 
                 if meta.get("physical_version") != PHYSICAL_VERSION:
                     raise ModelError(f"'{path}' refines version {meta.get('physical_version')!r} of the physical "
@@ -113,7 +113,7 @@ class Chain:
 
     @property
     def used(self):
-        """The model that made the last outputs (for a chain, itself; see :class:`svbrdf_cli.auto_tier.AutoModel`)."""
+        """The model that made the last outputs (for a chain, itself; see :class:`svbrdf_cli.infer.auto.AutoModel`)."""
         return self
 
     def describe(self):
@@ -148,7 +148,7 @@ class Chain:
         x = np.ascontiguousarray(np.pad(img, pad, mode=mode).transpose(2, 0, 1)[None])
         feeds = {"photo": x}
         if any(PHYSICAL_INPUT in self.meta[s]["inputs"].split(",") for s in self.stages):
-            from svbrdf_cli import physical
+            from svbrdf_cli.infer import physical
 
             t0 = time.perf_counter()  # the estimate of the photo as it is (its geometry), padded like it
             est = np.pad(physical.network_input(img), pad, mode=mode)

@@ -26,11 +26,11 @@ import shutil
 import sys
 import tempfile
 
-from svbrdf_cli import pipeline
-from svbrdf_cli.atomic import clean_partials
-from svbrdf_cli.batch import Counts, describe_failure, plan_inputs
+from svbrdf_cli.run import pipeline
+from svbrdf_cli.write.atomic import clean_partials
+from svbrdf_cli.run.batch import Counts, describe_failure, plan_inputs
 from svbrdf_cli.errors import SvbrdfError
-from svbrdf_cli.models import check_model, load_model
+from svbrdf_cli.infer.registry import check_model, load_model
 
 log = logging.getLogger("svbrdf")
 
@@ -152,7 +152,7 @@ def _silenced_fd2(active):
 
 
 def run_ray(files, job, address=None, workers=None, err=print):
-    """Run ``job`` (:class:`svbrdf_cli.batch.Job`) on Ray; returns :class:`svbrdf_cli.batch.Counts` like the
+    """Run ``job`` (:class:`svbrdf_cli.run.batch.Job`) on Ray; returns :class:`svbrdf_cli.run.batch.Counts` like the
     local engine. Each worker runs ``job.threads`` onnxruntime threads (0: one)."""
     output, opts, model, quiet = job.output, job.opts, job.model, job.quiet
     threads_per_worker = job.threads or 1

@@ -305,8 +305,8 @@ def _spec_change(change, tint):
 
 def _radial(side, centre, rings=RADIAL_RINGS):
     """(distance of each pixel to ``centre`` (H, W), ring centres, ring of each pixel (flat), pixels per
-    ring) at ``side``², the rings of :func:`svbrdf_cli.physical._rings`; made once per level."""
-    from svbrdf_cli.physical import _rings
+    ring) at ``side``², the rings of :func:`svbrdf_cli.infer.physical._rings`; made once per level."""
+    from svbrdf_cli.infer.physical import _rings
 
     p = cv.surface_positions(side, side)
     rho = np.hypot(p[..., 0] - centre[0], p[..., 1] - centre[1]).astype(np.float32)
@@ -369,10 +369,10 @@ def fit_intensity(photo_lin, params, geometry, weight=None):
 
 def _fill_unobserved(start, p, unobserved, radial=None):
     """``p`` with its change from ``start`` (:data:`FILLED`: tilt, diffuse, roughness, F0) at the ``unobserved`` pixels (the
-    photo clipped them) taken from their surroundings' change (:func:`svbrdf_cli.physical.fill_from_surroundings`),
+    photo clipped them) taken from their surroundings' change (:func:`svbrdf_cli.infer.physical.fill_from_surroundings`),
     those of :data:`RADIAL_FREE` then freed of any radial trend again (``radial``: :func:`_radial`). The photo
     term is per pixel, so the fill leaves it as it is; see :data:`FILL_UNOBSERVED`."""
-    from svbrdf_cli.physical import fill_from_surroundings
+    from svbrdf_cli.infer.physical import fill_from_surroundings
 
     if not unobserved.any() or unobserved.all():
         return p
@@ -392,7 +392,7 @@ def refine(image, stored, geometry, iterations=DEFAULT_ITERATIONS, priors=None, 
     Args:
         image: (S, S, 3) encoded photo in [0, 1] (the network input).
         stored: dict of (S, S, C) stored-encoding maps (the model's output).
-        geometry: a :class:`svbrdf_cli.geometry.CaptureGeometry`.
+        geometry: a :class:`svbrdf_cli.infer.geometry.CaptureGeometry`.
         iterations: Adam steps in all, over the levels of :data:`LEVELS`.
         priors: :class:`Priors` (default weights when None).
         progress: optional callable ``progress(steps_done)`` called after each step.

@@ -10,7 +10,7 @@ as the camera meant it (EXIF orientation applied), whatever the file:
 
 Grey images are repeated to three channels, alpha is dropped. The networks
 take the photo exposed, clipped and encoded as training images are
-(:func:`encode_for_network`, through :func:`svbrdf_cli.pipeline.network_input`).
+(:func:`encode_for_network`, through :func:`svbrdf_cli.run.pipeline.network_input`).
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 Each preset is a function ``write_<name>(folder, maps, *, bits, fmt, force)``
 that writes one texture set into ``folder`` and returns the paths it wrote;
 :data:`PRESETS` maps CLI names to them. The input is the runtime's linear map
-set (see :mod:`svbrdf_cli.mapset`): ``normal`` (H, W, 3) unit vectors, +Y up;
+set (see :mod:`svbrdf_cli.write.mapset`): ``normal`` (H, W, 3) unit vectors, +Y up;
 ``diffuse`` and ``specular`` (H, W, 3) linear albedo / F0; ``roughness``
 (H, W, 1) perceptual roughness (alpha = r**2, the same parametrisation glTF,
 Unreal, Unity and Blender use, so it is copied, never remapped).
@@ -48,7 +48,7 @@ normals with Frankot-Chellappa (:func:`normals_to_height`).
 Sets are written atomically: every file goes into a hidden sibling folder that
 is renamed into place once complete, so a failure never leaves a half-written
 set (or the temporary folder) behind, and an existing set is only replaced
-with ``force=True`` when it is a set this tool wrote (:mod:`svbrdf_cli.atomic`).
+with ``force=True`` when it is a set this tool wrote (:mod:`svbrdf_cli.write.atomic`).
 """
 
 from __future__ import annotations
@@ -64,7 +64,7 @@ import numpy as np
 from svbrdf_cli import __version__
 from svbrdf_cli import conventions as cv
 from svbrdf_cli import imageio
-from svbrdf_cli.atomic import write_set
+from svbrdf_cli.write.atomic import write_set
 from svbrdf_cli.errors import MapSetError
 
 log = logging.getLogger("svbrdf")
@@ -377,7 +377,7 @@ def write_svbrdf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, pr
     """Native set: ``normal.png diffuse.png roughness.png specular.png`` and
     ``texture_set.json`` (their roles and encodings).
 
-    Written by :func:`svbrdf_cli.mapset.write_map_set` in the Des18 encoding
+    Written by :func:`svbrdf_cli.write.mapset.write_map_set` in the Des18 encoding
     (benchmarks and ``svbrdf render`` read it back). PNG only, no height.
 
     Args:
@@ -394,7 +394,7 @@ def write_svbrdf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, pr
     Returns:
         List of the written paths.
     """
-    from svbrdf_cli import mapset
+    from svbrdf_cli.write import mapset
 
     _check_options(bits, fmt, png_only="svbrdf")
     _check_maps(maps if stored is None else stored)
@@ -593,7 +593,7 @@ def write_preset(preset, folder, maps, stored=None, **kwargs):
     Keyword arguments: ``bits``, ``fmt``, ``force``, ``extra`` (a function
     of the temporary folder that writes more files into the same atomic set),
     ``protect`` (paths the run reads: a folder holding one is never
-    replaced; see :func:`svbrdf_cli.atomic.write_set`), ``name`` (the
+    replaced; see :func:`svbrdf_cli.write.atomic.write_set`), ``name`` (the
     material's name in engine file names, :func:`asset_name`),
     ``tileable`` (the maps wrap: the height map is integrated periodically)
     and ``ao`` (ambient occlusion from the height in ORM, MaskMap and glTF's
@@ -611,7 +611,7 @@ def write_preset(preset, folder, maps, stored=None, **kwargs):
     if stored is not None and maps is None:
         if writer is write_svbrdf:
             return writer(folder, None, stored=stored, **kwargs)
-        from svbrdf_cli.mapset import stored_to_linear
+        from svbrdf_cli.write.mapset import stored_to_linear
 
         maps = stored_to_linear(stored)
     return writer(folder, maps, **kwargs)

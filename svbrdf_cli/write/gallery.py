@@ -12,7 +12,7 @@ import html
 import json
 import os
 
-from svbrdf_cli.atomic import SET_MARKERS, write_text
+from svbrdf_cli.write.atomic import SET_MARKERS, write_text
 
 #: The gallery's file name in the output folder.
 GALLERY = "index.html"

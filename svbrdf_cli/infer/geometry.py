@@ -27,7 +27,7 @@ import math
 import numpy as np
 
 from svbrdf_cli import conventions as cv
-from svbrdf_cli import highlight
+from svbrdf_cli.rectify import highlight
 
 #: Half the diagonal of a 35 mm film frame (36 x 24 mm), in mm: 35 mm-equivalent focal lengths
 #: are defined on the diagonal.
@@ -95,7 +95,7 @@ def camera_foot(photo_size, box):
 
 def highlight_centre(image):
     """(x, y) surface position of the flash highlight (or, on a matte surface, of the brightness peak):
-    the centre of :func:`svbrdf_cli.highlight.find`'s blob.
+    the centre of :func:`svbrdf_cli.rectify.highlight.find`'s blob.
 
     Args:
         image: (H, W, 3) encoded photo in [0, 1].
@@ -153,7 +153,7 @@ def for_capture(image, path, photo_shape, crop_report, found=None):
         image: the network input (encoded crop).
         path: the photo's file (its EXIF focal length is read when present).
         photo_shape: the decoded photo's (height, width, ...).
-        crop_report: the crop's report (:class:`svbrdf_cli.rectify.Crop`): an ``auto`` or ``none`` crop
+        crop_report: the crop's report (:class:`svbrdf_cli.rectify.crops.Crop`): an ``auto`` or ``none`` crop
             has a ``box`` in the photo; a rectified one has none.
         found: the physical estimate's findings when the model was the physical estimate (its flash
             height); otherwise the estimate is run for it.
@@ -163,7 +163,7 @@ def for_capture(image, path, photo_shape, crop_report, found=None):
     height = None
     if not focal or box is None:
         if not found or "flash_height" not in found:
-            from svbrdf_cli.physical import estimate as physical_estimate
+            from svbrdf_cli.infer.physical import estimate as physical_estimate
 
             found = physical_estimate(image)[1]
         height = found["flash_height"]

@@ -1,8 +1,8 @@
 """Capture benchmark: seconds per photo by stage, and peak memory, at several output sizes.
 
-    python -m svbrdf_cli.capture_speed                       # 256, 1024, 2048 from a 12 MP JPEG
-    python -m svbrdf_cli.capture_speed --sizes 256,4096 --repeat 5 --photo my.dng
-    python -m svbrdf_cli.capture_speed --throughput 24      # svbrdf batch: local engine vs Ray, photos/s
+    python -m export.studies.capture_speed                       # 256, 1024, 2048 from a 12 MP JPEG
+    python -m export.studies.capture_speed --sizes 256,4096 --repeat 5 --photo my.dng
+    python -m export.studies.capture_speed --throughput 24      # svbrdf batch: local engine vs Ray, photos/s
 
 Each configuration runs in its own process (so peak memory is its own):
 the photo is read, cropped, exposed, run through the model chain,
@@ -45,8 +45,8 @@ def _synthetic_photo(path, width=4000, height=3000):
 
 def _one(photo, size, repeat, upsample, model, threads):
     """In this process: run the job ``repeat`` times; returns timings and peak memory."""
-    from svbrdf_cli import pipeline
-    from svbrdf_cli.models import load_model
+    from svbrdf_cli.run import pipeline
+    from svbrdf_cli.infer.registry import load_model
 
     chain = load_model(model, threads=threads)
     # refine=0: every variant here does the same work (decode, infer, upsample, write); --refine's own
@@ -79,7 +79,7 @@ def median_seconds(fn, repeat):
 def _networks_only(model, threads, repeat):
     import numpy as np
 
-    from svbrdf_cli.models import load_model
+    from svbrdf_cli.infer.registry import load_model
 
     chain = load_model(model, threads=threads)
     x = np.random.default_rng(0).uniform(0, 1, (256, 256, 3)).astype(np.float32)
@@ -88,7 +88,7 @@ def _networks_only(model, threads, repeat):
 
 
 def _spawn(args):
-    r = subprocess.run([sys.executable, "-m", "svbrdf_cli.capture_speed", "--child", json.dumps(args)],
+    r = subprocess.run([sys.executable, "-m", "export.studies.capture_speed", "--child", json.dumps(args)],
                        capture_output=True, text=True)
     if r.returncode:
         raise SystemExit(f"error: benchmark child failed: {r.stderr.strip().splitlines()[-1:]}")
@@ -140,7 +140,7 @@ def _ratios(model, threads, repeat, dng=None):
     print("| case | whole s | model s | whole / model | peak MB |")
     print("|---|---|---|---|---|")
     def make(path, w, h):  # in a process of its own: Linux keeps a parent's peak memory across fork and exec
-        subprocess.run([sys.executable, "-c", "import sys; from svbrdf_cli.capture_speed import _synthetic_photo; "
+        subprocess.run([sys.executable, "-c", "import sys; from export.studies.capture_speed import _synthetic_photo; "
                         f"_synthetic_photo(sys.argv[1], {w}, {h})", path], check=True)
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -175,7 +175,7 @@ def _ratios(model, threads, repeat, dng=None):
 
 
 def _arguments(argv=None):
-    p = argparse.ArgumentParser(prog="python -m svbrdf_cli.capture_speed",
+    p = argparse.ArgumentParser(prog="python -m export.studies.capture_speed",
                                 description="Time the capture job by stage at several output sizes, with peak memory.")
     p.add_argument("--photo", default=None, help="Photo to run on (default: a synthetic 4000x3000 JPEG).")
     p.add_argument("--sizes", default="256,1024,2048", help="Output sizes (comma-separated; default %(default)s).")
@@ -216,7 +216,7 @@ def main(argv=None):
         if photo is None:
             photo = os.path.join(tmp, "photo_12mp.jpg")
             _synthetic_photo(photo)
-        from svbrdf_cli.ingest import load_photo
+        from svbrdf_cli.ingest.photo import load_photo
 
         h, w = load_photo(photo).linear.shape[:2]
         print(f"photo: {os.path.basename(photo)} {w}x{h}; model {model}; {os.cpu_count()} cores; "

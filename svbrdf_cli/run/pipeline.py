@@ -1,8 +1,8 @@
 """One photo in, one texture set out: ingest -> crop -> expose -> infer -> upsample -> write.
 
-:func:`capture` is the whole job for one photo; :mod:`svbrdf_cli.batch` loops
+:func:`capture` is the whole job for one photo; :mod:`svbrdf_cli.run.batch` loops
 over it for the CLI's ``capture`` and ``batch`` commands. Every output set is written atomically (see
-:mod:`svbrdf_cli.presets`): the preset's files plus ``material.json`` (what
+:mod:`svbrdf_cli.write.presets`): the preset's files plus ``material.json`` (what
 was done, with which model, how long it took), ``preview.png`` (the maps and
 three relit renders) and, with ``debug``, ``debug/`` (network input, masks and
 auxiliary renderings).
@@ -11,7 +11,7 @@ auxiliary renderings).
 validation resolution; they were trained on 128 px crops, see each model's
 ``provenance.json``); a model that runs at any size (``any_size``: the physical
 estimate) runs again at the output size, and ``--refine``'s change, found at
-:data:`NETWORK_SIZE`, is carried over to it (:func:`svbrdf_cli.refine.transfer`).
+:data:`NETWORK_SIZE`, is carried over to it (:func:`svbrdf_cli.infer.refine.transfer`).
 A network's larger outputs are made by *guided upsampling*
 (:func:`guided_upsample`): the normal and diffuse maps are regressed locally
 on the photo's brightness at network resolution, and the full-resolution
@@ -35,9 +35,10 @@ import numpy as np
 
 from svbrdf_cli import __version__
 from svbrdf_cli import conventions as cv
-from svbrdf_cli import ingest, rectify
+from svbrdf_cli.ingest import photo as ingest
+from svbrdf_cli.rectify import crops as rectify
 from svbrdf_cli.errors import SvbrdfError
-from svbrdf_cli.refine import DEFAULT_ITERATIONS as DEFAULT_REFINE
+from svbrdf_cli.infer.refine import DEFAULT_ITERATIONS as DEFAULT_REFINE
 
 log = logging.getLogger("svbrdf")
 
@@ -70,13 +71,13 @@ class Options:
     bits: int = 8
     fmt: str = "png"
     debug: bool = False
-    confidence: bool = False                   # also write confidence/<map>.png (svbrdf_cli.tta)
+    confidence: bool = False                   # also write confidence/<map>.png (svbrdf_cli.infer.tta)
     preview: bool = True
     force: bool = False
     name: str | None = None                    # the material's name in engine file names (default: the photo's)
-    tileable: bool = False                     # seamless maps (svbrdf_cli.tiling)
+    tileable: bool = False                     # seamless maps (svbrdf_cli.write.tiling)
     ao: bool = True                            # ambient occlusion from the height (engine presets)
-    refine: int = DEFAULT_REFINE               # test-time refinement steps (svbrdf_cli.refine); 0: off
+    refine: int = DEFAULT_REFINE               # test-time refinement steps (svbrdf_cli.infer.refine); 0: off
 
 
 # --------------------------------------------------------------------------
@@ -221,8 +222,8 @@ def network_input(linear, gain_ev=None):
 
 
 def confidence_maps(chain, net_in, stored, side):
-    """{map: (side, side) confidence} from :data:`svbrdf_cli.tta.CONFIDENCE_PASSES` (``stored``: the plain pass)."""
-    from svbrdf_cli import tta
+    """{map: (side, side) confidence} from :data:`svbrdf_cli.infer.tta.CONFIDENCE_PASSES` (``stored``: the plain pass)."""
+    from svbrdf_cli.infer import tta
 
     conf = tta.confidence([stored] + tta.passes(chain, net_in, tta.CONFIDENCE_PASSES[1:]))
     return {k: v if v.shape[0] == side else np.clip(_resize_to(v[..., None], (side, side))[..., 0], 0, 1)
@@ -243,7 +244,7 @@ def preview_image(network_input, stored, tile=256):
     """4 x 2 grid: photo, normal, diffuse, roughness / specular and three relit renders."""
     import cv2
 
-    from svbrdf_cli.mapset import stored_to_linear
+    from svbrdf_cli.write.mapset import stored_to_linear
     from svbrdf_cli.shading import render_maps
 
     small = {k: resize(v, tile) for k, v in stored.items()}
@@ -321,13 +322,14 @@ def prepare(path, opts):
 
 
 def refine_maps(prepared, chain, net_in, stored, iterations):
-    """``--refine``: the capture's geometry from the photo, then :func:`svbrdf_cli.refine.refine` at the
+    """``--refine``: the capture's geometry from the photo, then :func:`svbrdf_cli.infer.refine.refine` at the
     network's size, with a progress bar on a terminal (not with --quiet). Returns (maps, record entries)."""
     import sys
 
     from tqdm import tqdm
 
-    from svbrdf_cli import geometry, refine
+    from svbrdf_cli.infer import geometry
+    from svbrdf_cli.infer import refine
 
     p = prepared
     found = getattr(getattr(chain, "used", chain), "found", None)
@@ -352,7 +354,7 @@ def infer_set(prepared, chain, out_root, opts, model_name="fast"):
     """The model's part of :func:`capture` (infer, refine, upsample): returns a function of no
     arguments that writes the set (preview, PNG encoding, the atomic rename) and returns (folder,
     record). A batch runs it on a thread while the next photo is in the model."""
-    from svbrdf_cli.mapset import stored_to_linear
+    from svbrdf_cli.write.mapset import stored_to_linear
 
     p = prepared
     folder = output_folder(out_root, p.path)
@@ -384,7 +386,7 @@ def infer_set(prepared, chain, out_root, opts, model_name="fast"):
     if refined is not None and side == NETWORK_SIZE:
         start = low_refined
     elif refined is not None:
-        from svbrdf_cli.refine import transfer
+        from svbrdf_cli.infer.refine import transfer
 
         start = transfer(stored, low_refined, start)
     stored = start
@@ -393,8 +395,8 @@ def infer_set(prepared, chain, out_root, opts, model_name="fast"):
             raise SvbrdfError(f"The model produced non-finite values for '{p.path}' ({k}); please report this photo.")
     maps = None  # linear maps, made only where needed (the native preset writes the stored ones)
     if opts.tileable:
-        from svbrdf_cli.mapset import linear_to_stored
-        from svbrdf_cli.tiling import make_tileable
+        from svbrdf_cli.write.mapset import linear_to_stored
+        from svbrdf_cli.write.tiling import make_tileable
 
         maps = make_tileable(stored_to_linear(stored))
         stored = linear_to_stored(maps)
@@ -424,7 +426,7 @@ def infer_set(prepared, chain, out_root, opts, model_name="fast"):
     if refined is not None:
         record.update(refined)
     if conf is not None:
-        from svbrdf_cli import tta
+        from svbrdf_cli.infer import tta
 
         record["confidence"] = {"passes": len(tta.CONFIDENCE_PASSES), "half_at_disagreement": tta.CONFIDENCE_HALF,
                                 "mean": {k: round(float(v.mean()), 4) for k, v in conf.items()}}
@@ -436,7 +438,7 @@ def infer_set(prepared, chain, out_root, opts, model_name="fast"):
 def _write_set(path, folder, opts, record, timings, stored, maps, net_in, out, conf):
     """The writing part of :func:`capture` (see :func:`infer_set`): returns (folder, record)."""
     from svbrdf_cli.imageio import write_image
-    from svbrdf_cli.presets import write_preset
+    from svbrdf_cli.write.presets import write_preset
 
     t2 = time.perf_counter()
     record["input"]["sha256"] = file_sha256(path)

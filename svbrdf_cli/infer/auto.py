@@ -1,6 +1,6 @@
 """``--model auto``: per photo, the cheapest installed tier that is good enough for the scene.
 
-The ladder starts with the physical estimate (``physical``, :mod:`svbrdf_cli.physical`: the default
+The ladder starts with the physical estimate (``physical``, :mod:`svbrdf_cli.infer.physical`: the default
 model, computed rather than learnt, and the cheapest), then the installed networks.
 
 The rule lives in ``models/auto.json`` (written by ``python -m export.auto_calibration``,
@@ -28,12 +28,12 @@ import time
 import numpy as np
 
 from svbrdf_cli import conventions as cv
-from svbrdf_cli.inference import MODELS_DIR, Chain, ModelError, installed_tiers
+from svbrdf_cli.infer.chain import MODELS_DIR, Chain, ModelError, installed_tiers
 
 #: Where the calibrated rule is shipped.
 RULE_FILE = os.path.join(MODELS_DIR, "auto.json")
 #: The ladder's first rung: the physical estimate, which needs no model file (the name
-#: ``svbrdf_cli.models.PHYSICAL`` gives it; ``models`` loads this module, so it is not imported here).
+#: ``svbrdf_cli.infer.registry.PHYSICAL`` gives it; ``models`` loads this module, so it is not imported here).
 PHYSICAL = "physical"
 
 
@@ -55,7 +55,7 @@ def _specular(image, maps, chain):
 
 
 def _disagreement(image, maps, chain):
-    from svbrdf_cli import tta
+    from svbrdf_cli.infer import tta
 
     spread = tta.disagreement([maps] + tta.passes(chain, image, [(1, False)]))
     return float(np.mean([d.mean() for d in spread.values()]))
@@ -66,7 +66,7 @@ SIGNALS = {
     "contrast": (_contrast, 0, "standard deviation of the network input"),
     "saturated": (_saturated, 0, "fraction of saturated pixels in the network input"),
     "specular": (_specular, 0, "mean specular albedo (stored) the cheap tier predicts"),
-    "disagreement": (_disagreement, 1, "mean per-pixel spread (svbrdf_cli.tta.disagreement) of the cheap "
+    "disagreement": (_disagreement, 1, "mean per-pixel spread (svbrdf_cli.infer.tta.disagreement) of the cheap "
                                         "tier's maps of the photo and of the photo turned by 90°"),
 }
 
@@ -111,7 +111,7 @@ def decide(rule, values):
 
 
 class AutoModel:
-    """Called like :class:`svbrdf_cli.inference.Chain`; after each call ``used`` is the chain whose maps
+    """Called like :class:`svbrdf_cli.infer.chain.Chain`; after each call ``used`` is the chain whose maps
     it returned and ``decision`` says why."""
 
     tier = "auto"
@@ -124,9 +124,9 @@ class AutoModel:
         self.timings, self.decision, self._used = {}, None, None
 
     def chain(self, tier):
-        if tier not in self._chains:  # (not svbrdf_cli.models.load_model: models loads this module)
+        if tier not in self._chains:  # (not svbrdf_cli.infer.registry.load_model: models loads this module)
             if tier == PHYSICAL:
-                from svbrdf_cli.physical import PhysicalModel
+                from svbrdf_cli.infer.physical import PhysicalModel
 
                 self._chains[tier] = PhysicalModel()
             else:
