@@ -183,7 +183,7 @@ def export_run(run, out, size=256, weights="float16"):
 
     Beside the models, ``provenance.json`` holds the run's provenance (data,
     steps, device, time, validation), the export settings and each file's
-    size and SHA-256; ``python -m export.evaluate --onnx OUT --record`` adds
+    size and SHA-256; ``python -m export.studies.evaluate --onnx OUT --record`` adds
     the Des19 scores of the exported chain.
     """
     import hashlib

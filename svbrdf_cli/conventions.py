@@ -212,7 +212,7 @@ LIGHT_INTENSITY = 0.5 * CAMERA_HEIGHT ** 2
 #: inputs from their maps read as linear albedo. Fitted per sample on the pixels where
 #: the diffuse term dominates (specular under 10 % of it, none clipped): median 10.35
 #: over the 18 samples with enough such pixels, p10-p90 6.3-14.0
-#: (``python -m export.physical_eval --fit-flash``). The physical estimate
+#: (``python -m export.studies.physical_eval --fit-flash``). The physical estimate
 #: (:mod:`svbrdf_cli.infer.physical`) divides by it to put albedo on an absolute scale.
 FLASH_INTENSITY = 10.35
 

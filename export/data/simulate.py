@@ -70,7 +70,7 @@ class CaptureRanges:
     #: Flash power: conventions.FLASH_INTENSITY x (camera height / the conventions') ^ 2 (the
     #: same irradiance under the lens at any distance) x a log-normal jitter. Sigma 0.31 is the
     #: spread of the Des19 inputs' fitted power (p10-p90 6.3-14.0 around the median 10.35,
-    #: ``python -m export.physical_eval --fit-flash``).
+    #: ``python -m export.studies.physical_eval --fit-flash``).
     power_log_sigma: float = 0.31
     #: Optical softening (lens, demosaicing, downscaling): Gaussian sigma in
     #: pixels at 256² (scaled with the image size).

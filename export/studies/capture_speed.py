@@ -50,7 +50,7 @@ def _one(photo, size, repeat, upsample, model, threads):
 
     chain = load_model(model, threads=threads)
     # refine=0: every variant here does the same work (decode, infer, upsample, write); --refine's own
-    # time is measured by export.refine_eval
+    # time is measured by export.studies.refine_eval
     opts = pipeline.Options(size=size, upsample=upsample, force=True, refine=0)
     runs = []
     with tempfile.TemporaryDirectory() as out:

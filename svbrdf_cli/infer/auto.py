@@ -3,7 +3,7 @@
 The ladder starts with the physical estimate (``physical``, :mod:`svbrdf_cli.infer.physical`: the default
 model, computed rather than learnt, and the cheapest), then the installed networks.
 
-The rule lives in ``models/auto.json`` (written by ``python -m export.auto_calibration``,
+The rule lives in ``models/auto.json`` (written by ``python -m export.studies.auto_calibration``,
 with the numbers it was chosen on). It is a *ladder* of tiers, cheapest first,
 and for each step up a *signal*, a *threshold* and a side (``above``: true or
 false): the photo goes through the cheapest tier; the signal is computed on
@@ -88,7 +88,7 @@ def load_rule(path=RULE_FILE):
         raise ModelError(f"--model auto steps between {', '.join(rule['ladder'])}, but {', '.join(missing)} "
                          f"is not installed; pick --model {installed_tiers()[0] if installed_tiers() else 'FOLDER'}.")
     if len(rule["steps"]) != len(rule["ladder"]) - 1 or any(s["signal"] not in SIGNALS for s in rule["steps"]):
-        raise ModelError(f"'{path}' is not a rule this version understands; re-run python -m export.auto_calibration.")
+        raise ModelError(f"'{path}' is not a rule this version understands; re-run python -m export.studies.auto_calibration.")
     return rule
 
 

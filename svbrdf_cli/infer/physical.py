@@ -70,7 +70,7 @@ HEIGHT_GRID = np.array([0.75, 0.87, 1.0, 1.15, 1.35])
 #: and called 3 dielectrics metal, and specular RMSE rose from 0.0679 (F0 = 0.04 everywhere)
 #: to 0.0729; no threshold on the lobe-to-diffuse ratio or the photo's dynamic range
 #: separated the two on two independent generated sets. Metals are left to the networks. A logistic
-#: regression over 13 measures of the fit's evidence (``python -m export.metal_study``, session 12)
+#: regression over 13 measures of the fit's evidence (``python -m export.studies.metal_study``, session 12)
 #: found 8 of Des19's 11 metals with no false call, but called 14 of 267 real photos metal, every one
 #: I looked at a dark glossy dielectric (black plastic, leather, stained wood, granite). Issue 14's own
 #: cue, a highlight as coloured as the rest of the photo (same study, session 13), called 4 of Des19's
@@ -142,7 +142,7 @@ NEAR_CLIPPED = 0.95
 #: Normals from shading (:func:`normal_map`): the high-pass scale (fraction of the image
 #: width), the regularisation of the tilt under the flash (squared lateral light
 #: component), and the strength: the strongest whose normal RMSE on 64 generated photos
-#: is within 1 % of the best (``python -m export.physical_eval --normals``). Measured, every
+#: is within 1 % of the best (``python -m export.studies.physical_eval --normals``). Measured, every
 #: strength above 0 raises the error (0.05: +1.1 % on generated photos, Des19 0.0633
 #: against the flat 0.0590, card_blue relight 0.154 against 0.151): albedo texture reads as
 #: tilt as much as relief does. So the estimate's normals are flat, and relief is left to

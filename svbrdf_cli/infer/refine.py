@@ -45,7 +45,7 @@ from svbrdf_cli import conventions as cv
 from svbrdf_cli import shading
 
 #: Iterations of ``--refine`` given without a number (and of ``svbrdf capture`` without ``--refine``).
-#: 60 steps fit as well as 150 (``python -m export.refine_eval --methods physical --iterations N
+#: 60 steps fit as well as 150 (``python -m export.studies.refine_eval --methods physical --iterations N
 #: --repeat 0``, session 9: card relight 0.1320 against 0.1316, Des19 maps and held-out relight within
 #: 0.3 %) in 1.25 s instead of 3.17 s at 256²; the fit has converged long before.
 DEFAULT_ITERATIONS = 60
@@ -77,7 +77,7 @@ ENCODED_FLOOR = 1e-3
 class Priors:
     """Weights of the prior terms (each a mean over pixels, like the photo term).
 
-    Session 10 (``python -m export.refine_eval --methods physical --repeat 0``, and the held-out
+    Session 10 (``python -m export.studies.refine_eval --methods physical --repeat 0``, and the held-out
     relighting of 32 generated photos, a set that is neither the card nor Des19): the dielectric prior
     now holds F0's luminance only, and the closeness of diffuse (0.2 -> 0.05), specular (2 -> 1) and
     the smoothness of roughness (2 -> 0.5) are weaker. Measured against the session-9 weights: card
@@ -114,7 +114,7 @@ SPECULAR_RANGE = (0.0, 1.0)
 #: (water, 0.02, is the rare exception); a fit that lowers the whole map is explaining something else
 #: (the global intensity fitted at the start, a highlight spread by relief the flat start lacks),
 #: while its variation from pixel to pixel is the photo's evidence. Measured (``python -m
-#: export.refine_eval --methods physical --repeat 0``; physical estimate without refinement: Des19
+#: export.studies.refine_eval --methods physical --repeat 0``; physical estimate without refinement: Des19
 #: specular 0.0587, card relight 0.1459):
 #:
 #: * no floor: the fit lowered F0 on 27 of 29 Des19 samples (means 0.031-0.038, the lowest on metals

@@ -5,7 +5,7 @@ quarter turn or a mirror: the maps of the transformed photo, transformed
 back, should be the maps of the photo. Where the passes disagree the network
 is guessing, which is what :func:`confidence` turns into per-pixel maps,
 one per texture (``svbrdf capture --confidence``); the stability suite
-(``export/stability.py``, run by ``python -m export.benchmark``) uses the same transforms.
+(``export/studies/stability.py``, run by ``python -m export.studies.benchmark``) uses the same transforms.
 
 Geometry follows :mod:`svbrdf_cli.conventions`: +X right, +Y up (towards row
 0). Turning the image a quarter turn counter-clockwise (as displayed) turns

@@ -165,7 +165,7 @@ def guide_detail(guide_low, guide_high):
 
 
 #: Maps that take the photo's detail in guided upsampling; the others are
-#: bicubic (measured: ``python -m export.upsample_eval``, docs/capture.md).
+#: bicubic (measured: ``python -m export.studies.upsample_eval``, docs/capture.md).
 GUIDED_MAPS = ("normal", "diffuse")
 #: How maps reach the output size: guided by the photo (:data:`GUIDED_MAPS`), or plain bicubic.
 UPSAMPLE_METHODS = ("guided", "bicubic")

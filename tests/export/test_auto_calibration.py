@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from export.auto_calibration import choose_step
+from export.studies.auto_calibration import choose_step
 
 N = 200
 
@@ -50,7 +50,7 @@ def test_the_signals_own_cost_counts():
 
 
 def test_calibration_needs_two_tiers_and_says_so():
-    from export.auto_calibration import calibrate
+    from export.studies.auto_calibration import calibrate
     from svbrdf_cli.errors import SvbrdfError
 
     with pytest.raises(SvbrdfError, match="two installed tiers; found lite"):

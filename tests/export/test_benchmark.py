@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from export import stability
+from export.studies import stability
 from svbrdf_cli import conventions as cv
 
 
@@ -36,7 +36,7 @@ def test_rendered_variants_differ_where_they_should():
 
 def test_benchmark_runs_on_two_samples(shared_data, tmp_path):
     pytest.importorskip("matplotlib")
-    from export import benchmark
+    from export.studies import benchmark
 
     res = benchmark.run(limit=2, repeat=1, figures=str(tmp_path / "fig"), tables=str(tmp_path / "tab"),
                         log=lambda *a: None)

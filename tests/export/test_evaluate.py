@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from export import evaluate
+from export.studies import evaluate
 from export.files import shared_root
 from export.render.brdf import render_maps
 from svbrdf_cli import conventions as cv

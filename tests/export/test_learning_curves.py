@@ -1,11 +1,11 @@
-"""export.learning_curves: runs' validation histories joined in order, steps following on."""
+"""export.studies.learning_curves: runs' validation histories joined in order, steps following on."""
 
 import json
 
 import pytest
 import torch
 
-from export.learning_curves import load_curve, plot
+from export.studies.learning_curves import load_curve, plot
 from svbrdf_cli.errors import SvbrdfError
 
 

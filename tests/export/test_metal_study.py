@@ -1,8 +1,8 @@
-"""The metal study's parts (``python -m export.metal_study``): the regression and the fit's evidence."""
+"""The metal study's parts (``python -m export.studies.metal_study``): the regression and the fit's evidence."""
 
 import numpy as np
 
-from export import metal_study
+from export.studies import metal_study
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.infer import physical as ph
 

@@ -5,7 +5,7 @@ import os
 import numpy as np
 import pytest
 
-from export import methods as method_zoo
+from export.studies import methods as method_zoo
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.infer.chain import MODELS_DIR, Chain, ModelError, installed_tiers
 from svbrdf_cli.infer.physical import PhysicalModel

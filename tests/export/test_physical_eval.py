@@ -5,13 +5,13 @@ import tempfile
 
 import numpy as np
 
-from export import colour
-from export import methods
+from export.studies import colour
+from export.studies import methods
 
 
 def test_physical_beats_the_floor_on_des19_and_the_card(shared_data):
-    from export.benchmark import NineLights, des19_accuracy
-    from export.evaluate import load_des19
+    from export.studies.benchmark import NineLights, des19_accuracy
+    from export.studies.evaluate import load_des19
 
     des19 = str(shared_data / "validation" / "des19")
     samples = load_des19(des19)
@@ -27,7 +27,7 @@ def test_physical_beats_the_floor_on_des19_and_the_card(shared_data):
 
 
 def test_physical_keeps_the_colour_of_the_real_photos(shared_data):
-    from export import stability
+    from export.studies import stability
 
     from svbrdf_cli.run.pipeline import network_input
 

@@ -1,9 +1,9 @@
-"""``python -m export.refine_eval --prior NAME=VALUE``: the prior weights it measures."""
+"""``python -m export.studies.refine_eval --prior NAME=VALUE``: the prior weights it measures."""
 
 import click
 import pytest
 
-from export.refine_eval import parse_priors
+from export.studies.refine_eval import parse_priors
 from svbrdf_cli.infer import refine
 
 

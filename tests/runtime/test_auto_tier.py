@@ -80,7 +80,7 @@ def test_a_missing_or_unusable_rule_is_a_clear_error(tmp_path):
         with pytest.raises(ModelError, match="best is not installed"):
             auto_tier.load_rule(str(p))
     p.write_text(json.dumps({"ladder": installed_tiers()[:1] * 2, "steps": [{"signal": "moon", "threshold": 1}]}))
-    with pytest.raises(ModelError, match="re-run python -m export.auto_calibration"):
+    with pytest.raises(ModelError, match="re-run python -m export.studies.auto_calibration"):
         auto_tier.load_rule(str(p))
 
 

@@ -17,7 +17,7 @@ def test_a_model_is_shipped():
 
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-BASELINES = os.path.join(ROOT, "export", "baselines")
+BASELINES = os.path.join(ROOT, "weights", "baselines")
 
 
 def test_size_budget():

@@ -1,14 +1,14 @@
 """Does ``--refine`` relight better? Every method with and without test-time refinement, on lights it never saw.
 
-    python -m export.refine_eval                       # physical + every shipped tier, 150 iterations
-    python -m export.refine_eval --methods physical --iterations 150 --limit 5
+    python -m export.studies.refine_eval                       # physical + every shipped tier, 150 iterations
+    python -m export.studies.refine_eval --methods physical --iterations 150 --limit 5
 
-For each method (:mod:`export.methods`) and each setting (no refinement, ``--refine N``):
+For each method (:mod:`export.studies.methods`) and each setting (no refinement, ``--refine N``):
 
 * **card_blue_9lights**: maps from photo 00 (the most frontal), the capture's geometry estimated
   from that photo alone (:func:`svbrdf_cli.infer.geometry.estimate`, no EXIF in these files), rendered
   under the 8 other photos' known lights with one intensity fitted on photo 00
-  (:meth:`export.benchmark.NineLights.relight_rmse`);
+  (:meth:`export.studies.benchmark.NineLights.relight_rmse`);
 * **Des19**: per-map RMSE by the reference scorer (``score_maps.py``, linear albedo), and the
   re-rendering RMSE against the ground truth under :data:`HELD_OUT_LIGHTS` (9 lights, none at
   the input's flash);
@@ -35,9 +35,9 @@ import click
 import numpy as np
 import torch
 
-from export import methods as method_zoo
-from export.benchmark import NineLights, _chw
-from export.evaluate import load_des19, relight_rmse, render, score
+from export.studies import methods as method_zoo
+from export.studies.benchmark import NineLights, _chw
+from export.studies.evaluate import load_des19, relight_rmse, render, score
 from export.files import command_errors, shared_root
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.infer import geometry
@@ -79,7 +79,7 @@ def generated_relight(method, samples):
 
 def refined(method, iterations, timings=None, priors=None):
     """``method`` followed by :func:`svbrdf_cli.infer.refine.refine` under the photo's estimated geometry
-    (:class:`export.methods.Refined`, ``priors`` its :class:`svbrdf_cli.infer.refine.Priors`); ``method`` itself
+    (:class:`export.studies.methods.Refined`, ``priors`` its :class:`svbrdf_cli.infer.refine.Priors`); ``method`` itself
     when ``iterations`` is 0."""
     return method_zoo.Refined(method, iterations, timings, priors) if iterations else method
 
@@ -111,7 +111,7 @@ def des19(method, samples, des19_dir, out):
 
 def capture_seconds(model, refine_n, repeat, size=1024):
     """Median wall time of ``svbrdf capture`` on the bundled sample (a fresh process each run)."""
-    sample = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "examples", "glazed_tiles.jpg")
+    sample = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "examples", "glazed_tiles.jpg")
     times = []
     for _ in range(repeat):
         with tempfile.TemporaryDirectory() as out:
@@ -138,7 +138,7 @@ def run(names=None, iterations=refine.DEFAULT_ITERATIONS, limit=None, repeat=3, 
     work = tempfile.mkdtemp(prefix="svbrdf-refine-")
     rows = []
     if generated:
-        from export.auto_calibration import generated as generate
+        from export.studies.auto_calibration import generated as generate
 
         photos = generate(generated, seed=GENERATED_SEED)
     # (method, what `svbrdf capture --model` takes for it)

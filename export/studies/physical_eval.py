@@ -1,9 +1,9 @@
 """Calibration and checks of the physical estimate (:mod:`svbrdf_cli.infer.physical`), never on validation ground truth
 except for the one documented convention fit.
 
-    python -m export.physical_eval --fit-flash      # the Des19 inputs' flash power (conventions.FLASH_INTENSITY)
-    python -m export.physical_eval --normals        # NORMAL_STRENGTH on generated photos
-    python -m export.physical_eval --highlight-figure F.png --photo A.jpg ...   # v5's colour separation
+    python -m export.studies.physical_eval --fit-flash      # the Des19 inputs' flash power (conventions.FLASH_INTENSITY)
+    python -m export.studies.physical_eval --normals        # NORMAL_STRENGTH on generated photos
+    python -m export.studies.physical_eval --highlight-figure F.png --photo A.jpg ...   # v5's colour separation
 
 ``--fit-flash`` fits, per Des19 sample, the point-light intensity at the conventions' flash position
 that reproduces the input from its maps read as linear albedo, on the pixels where the diffuse term

@@ -1,6 +1,6 @@
 """Evaluate a trained run on the Des19 validation samples (paper Tables I and IV).
 
-    python -m export.evaluate --run runs/fast
+    python -m export.studies.evaluate --run runs/fast
 
 For every sample of ``../shared/data/validation/des19`` it predicts the maps
 from ``input.png``, writes them as native map sets under ``--out`` and scores
@@ -273,7 +273,7 @@ def cli(run, onnx, des19, out, json_out, threads, modes, record, oracle, known_f
                             if "full_known_flash" in results else {}),
                          "metric": "../shared/tools/score_maps.py (per-map RMSE; roughness as 0.9 r + 0.1); "
                                    "relight: mean RMSE of encoded renders under 9 lights",
-                         "command": f"python -m export.evaluate --onnx {onnx} --record"
+                         "command": f"python -m export.studies.evaluate --onnx {onnx} --record"
                                     + (" --known-flash" if known_flash else "")}
         write_json(path, prov)
 

@@ -18,7 +18,7 @@ import numpy as np
 from svbrdf_cli import conventions as cv
 
 #: Where exported baselines live (not shipped in the package: they are for comparison only).
-BASELINES_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "baselines")
+BASELINES_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "weights", "baselines")
 #: The paper's published time per image (GPU, 256²), quoted beside its accuracy.
 PAPER_GPU_SECONDS = 0.107
 TIER_LABELS = {"lite": "lite tier (one small end-to-end UNet)"}

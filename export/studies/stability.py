@@ -1,4 +1,4 @@
-"""The stability suite: what perturbed photos do to the maps (run by ``python -m export.benchmark``).
+"""The stability suite: what perturbed photos do to the maps (run by ``python -m export.studies.benchmark``).
 
 Single-image methods fail on over-smooth inputs, large strong highlights and
 ambiguous relief (the paper's Fig. 13). Each perturbation below is applied to
@@ -29,7 +29,7 @@ import tempfile
 
 import numpy as np
 
-from export.evaluate import score
+from export.studies.evaluate import score
 from export.render.brdf import render_maps
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.infer import tta
@@ -163,7 +163,7 @@ def real_crops(real_root, count):
 
 
 def run(chain, des19_samples, des19_dir, real, gallery=None, log=print, seed=0):
-    """Run every perturbation on ``des19_samples`` (from ``export.evaluate.load_des19(des19_dir)``) and
+    """Run every perturbation on ``des19_samples`` (from ``export.studies.evaluate.load_des19(des19_dir)``) and
     ``real`` photos (:func:`real_crops`); returns {"rows": {name: stats}, "clean": Des19 scores,
     "failures": [...], "photos": counts}."""
     rng = np.random.default_rng(seed)

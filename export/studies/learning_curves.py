@@ -1,7 +1,7 @@
 """Learning curves of a training lineage: validation error against steps, per map, next to the physical estimate.
 
-    python -m export.learning_curves export/checkpoints/lite-normal/provenance.json -o docs/figures/learning_curve.png
-    python -m export.learning_curves RUN_A/maps.pt RUN_B/maps.pt --json curve.json   # join runs' histories
+    python -m export.studies.learning_curves weights/checkpoints/lite-normal/provenance.json -o docs/figures/learning_curve.png
+    python -m export.studies.learning_curves RUN_A/maps.pt RUN_B/maps.pt --json curve.json   # join runs' histories
 
 Inputs are checkpoints (``maps.pt``: their ``history`` holds a validation entry every
 ``--val-every`` steps) or a ``provenance.json`` whose ``learning_curve`` holds such entries already

@@ -1,6 +1,6 @@
 """Colour fidelity: does a method's diffuse keep the photo's colour?
 
-    python -m export.colour            # every runnable method on the 12 real photos of the benchmark
+    python -m export.studies.colour            # every runnable method on the 12 real photos of the benchmark
 
 For each real photo (cropped and exposed as ``svbrdf capture`` does) and each method, the photo
 and the method's diffuse map are compared in HSV of their encoded values (the photo's network
@@ -114,8 +114,8 @@ def table(results):
 @click.option("--tables", default="docs/tables", show_default=True, type=click.Path(file_okay=False))
 def cli(tables):
     """Colour fidelity of every runnable method on the benchmark's real photos."""
-    from export import methods as method_zoo
-    from export import stability
+    from export.studies import methods as method_zoo
+    from export.studies import stability
     from export.files import shared_root
 
     from svbrdf_cli.run.pipeline import network_input

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # svbrdf capture on every real photo in ../shared/data/real (one output folder per source folder) and the DNG.
-# Usage: export/real_photos.sh [SHARED_DATA [OUT [capture options...]]]   (svbrdf on PATH)
+# Usage: export/studies/real_photos.sh [SHARED_DATA [OUT [capture options...]]]   (svbrdf on PATH)
 set -u
 SHARED=${1:-../shared/data}; OUT=${2:-/tmp/real_out}; shift $(( $# < 2 ? $# : 2 ))
 rm -rf "$OUT"; mkdir -p "$OUT"

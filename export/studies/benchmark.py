@@ -1,14 +1,14 @@
 """Speed against accuracy, --model auto, stability, and confidence: the figures of ``docs/benchmarks.md`` and ``docs/stability.md``.
 
-    python -m export.benchmark                 # everything (minutes on 2 cores), into docs/
-    python -m export.benchmark --limit 2       # a smoke run on 2 samples of each set
+    python -m export.studies.benchmark                 # everything (minutes on 2 cores), into docs/
+    python -m export.studies.benchmark --limit 2       # a smoke run on 2 samples of each set
 
-For every runnable method (:mod:`export.methods`: the floor, the end-to-end
+For every runnable method (:mod:`export.studies.methods`: the floor, the end-to-end
 baseline, each installed tier, ``--model auto``) it measures, in one run:
 
 * **Des19 accuracy**: the maps of each sample's ``input.png``, scored by the
   paper's reference scorer ``../shared/tools/score_maps.py`` (per-map RMSE),
-  and the re-rendering RMSE under 9 lights (``export.evaluate``). The paper's
+  and the re-rendering RMSE under 9 lights (``export.studies.evaluate``). The paper's
   published outputs are scored the same way (accuracy only; its 0.107 s is
   a GPU time).
 * **Real relighting** on ``../shared/data/real/card_blue_9lights``: maps from
@@ -23,12 +23,12 @@ baseline, each installed tier, ``--model auto``) it measures, in one run:
   -> network input -> maps -> guided upsampling to 2048², as ``svbrdf
   capture`` does it, without file input/output).
 
-It scores colour fidelity on the real photos (:mod:`export.colour`: the diffuse map's hue and
-saturation against the photo's, highlight excluded). It then runs the auto evidence (:func:`export.auto_calibration.evidence`: the shipped
+It scores colour fidelity on the real photos (:mod:`export.studies.colour`: the diffuse map's hue and
+saturation against the photo's, highlight excluded). It then runs the auto evidence (:func:`export.studies.auto_calibration.evidence`: the shipped
 rule against each tier on Des19, ``card_blue_9lights`` and the real photos,
 with time per photo measured on those photos; then auto's calibration again,
 to show it reproduces the shipped rule), the stability suite
-(:mod:`export.stability`) and the confidence evidence (does low confidence
+(:mod:`export.studies.stability`) and the confidence evidence (does low confidence
 mark high error on Des19?) and writes ``speed_vs_accuracy.png``,
 ``stability_gallery.png`` and ``benchmark.json`` into ``--figures`` and the
 tables into ``--tables``.
@@ -44,10 +44,10 @@ import click
 import numpy as np
 import torch
 
-from export import methods as method_zoo
-from export.auto_calibration import CALIBRATION_SAMPLES, calibrate, calibration_table, generated
-from export.auto_calibration import evidence as auto_evidence, evidence_table as auto_table
-from export.evaluate import fit_intensity, load_des19, relight_rmse, score, score_predictions
+from export.studies import methods as method_zoo
+from export.studies.auto_calibration import CALIBRATION_SAMPLES, calibrate, calibration_table, generated
+from export.studies.auto_calibration import evidence as auto_evidence, evidence_table as auto_table
+from export.studies.evaluate import fit_intensity, load_des19, relight_rmse, score, score_predictions
 from export.files import command_errors, shared_root
 from export.render.brdf import render_maps
 from svbrdf_cli import conventions as cv
@@ -256,7 +256,7 @@ def confidence_table(ev):
 
 def run(limit=None, repeat=5, figures="docs/figures", tables="docs/tables", stability=True, log=print, threads=0):
     """The whole benchmark; returns its results (also written as ``benchmark.json`` beside the figures)."""
-    from export import stability as stability_suite
+    from export.studies import stability as stability_suite
     root = shared_root() / "data"
     des19 = str(root / "validation" / "des19")
     if not os.path.isdir(des19):
@@ -303,7 +303,7 @@ def run(limit=None, repeat=5, figures="docs/figures", tables="docs/tables", stab
     results["confidence"] = {"tier": conf_tier, "maps": confidence_evidence(by_name[conf_tier].chain, samples)}
     real = stability_suite.real_crops(root / "real", limit or stability_suite.REAL_PHOTOS) if os.path.isdir(root / "real") else []
     real_inputs = [(name, network_input(lin)) for name, lin in real]  # once, for colour and auto
-    from export import colour
+    from export.studies import colour
 
     results["colour"] = colour.evaluate(methods, real_inputs, log=log)
     if "auto" in by_name:
@@ -311,7 +311,7 @@ def run(limit=None, repeat=5, figures="docs/figures", tables="docs/tables", stab
         tiers = {t: by_name[t].chain for t in rule["ladder"]}
         results["auto"] = {"rule": rule, "sets": auto_evidence(rule, samples, nine, [x for _, x in real_inputs],
                                                                chains=tiers, log=log)}
-        # The shipped rule's calibration, run again (python -m export.auto_calibration, without writing the rule).
+        # The shipped rule's calibration, run again (python -m export.studies.auto_calibration, without writing the rule).
         fresh = calibrate(generated(8 if limit else CALIBRATION_SAMPLES), chains=tiers, repeat=repeat, log=log)
         results["auto"]["recalibrated"] = {"rule": fresh, "same_steps_as_shipped": fresh["steps"] == rule["steps"]}
     os.makedirs(figures, exist_ok=True)
@@ -324,7 +324,7 @@ def run(limit=None, repeat=5, figures="docs/figures", tables="docs/tables", stab
         text["auto.md"] = (auto_table(results["auto"]["sets"], rule["ladder"]) + "\n" + calibration_table(again["rule"])
                            + "\nThis calibration, run again by the benchmark, "
                            + ("gives the shipped rule's steps.\n" if again["same_steps_as_shipped"]
-                              else "does NOT give the shipped rule's steps: re-run python -m export.auto_calibration.\n"))
+                              else "does NOT give the shipped rule's steps: re-run python -m export.studies.auto_calibration.\n"))
     if stability:
         results["stability"] = stability_suite.run(chain, samples, des19, real,
                                      gallery=os.path.join(figures, "stability_gallery.png"), log=log)

@@ -1,7 +1,7 @@
 """Can the flash photo alone tell a metal from a dielectric? A study, not a shipped rule.
 
-    python -m export.metal_study            # about 4 minutes on one core
-    python -m export.metal_study --model-dir EXPORT   # and a trained network's F0 on the same photos
+    python -m export.studies.metal_study            # about 4 minutes on one core
+    python -m export.studies.metal_study --model-dir EXPORT   # and a trained network's F0 on the same photos
 
 The physical estimate (:mod:`svbrdf_cli.infer.physical`) gives every photo the dielectric F0 = 0.04
 (``DETECT_METALS = False``). This study asks whether a calibrated decision over the fit's physical
@@ -137,7 +137,7 @@ def _matrix(rows):
 
 
 def _generated(seed, count):
-    from export.physical_eval import generated_photos
+    from export.studies.physical_eval import generated_photos
 
     photos, maps = generated_photos(count, size=256, seed=seed)
     rows = [features(p) for p in photos]
@@ -157,7 +157,7 @@ NETWORK_CALL = 0.15
 
 
 def _network_f0(network, image):
-    """Mean linear F0 of ``network``'s (an :class:`export.methods.Network`) maps for one encoded photo."""
+    """Mean linear F0 of ``network``'s (an :class:`export.studies.methods.Network`) maps for one encoded photo."""
     return float(cv.decode_maps(network(image))["specular"].mean())
 
 
@@ -176,7 +176,7 @@ def study(log=print, model_dir=None):
     if not (root / "data" / "validation" / "des19").is_dir():
         log("../shared not found: Des19 and the real photos are left out")
         return
-    from export.evaluate import load_des19
+    from export.studies.evaluate import load_des19
 
     des = load_des19(str(root / "data" / "validation" / "des19"))
     rows = [features(img.permute(1, 2, 0).numpy()) for _, img, _ in des]
@@ -185,7 +185,7 @@ def study(log=print, model_dir=None):
     _report("  colour rule", colour(rows), rows, gt, gt > DES19_METAL, log)
     network = None
     if model_dir:
-        from export.methods import Network
+        from export.studies.methods import Network
 
         network = Network(os.path.basename(os.path.normpath(model_dir)), model_dir, threads=1)
         f0 = np.array([_network_f0(network, img.permute(1, 2, 0).numpy()) for _, img, _ in des])

@@ -1,12 +1,12 @@
 """Calibrate ``--model auto`` on generated photos, and measure it on Des19 and the real photos.
 
-    python -m export.auto_calibration                  # calibrate: writes svbrdf_cli/models/auto.json
-    python -m export.auto_calibration --samples 16 --out /tmp/auto.json    # a smoke run
+    python -m export.studies.auto_calibration                  # calibrate: writes svbrdf_cli/models/auto.json
+    python -m export.studies.auto_calibration --samples 16 --out /tmp/auto.json    # a smoke run
 
 **Calibration.** Photos from our own data engine (:mod:`export.data.dataset`,
 seed :data:`CALIBRATION_SEED`, which no training run uses) go through every
 installed tier; each tier's error is the re-rendering RMSE under 9 lights
-against the photo's ground truth (:func:`export.evaluate.relight_rmse`),
+against the photo's ground truth (:func:`export.studies.evaluate.relight_rmse`),
 its cost the median seconds per 256² image on this CPU. For each step up the
 ladder (tier i -> tier i + 1) and each signal of :data:`svbrdf_cli.infer.auto.SIGNALS`,
 every threshold is tried: photos whose signal is above it (or, the other
@@ -16,7 +16,7 @@ The rule kept is the *cheapest* whose mean error is within ``--margin``
 up" is one of the candidates, so when the cheap tier is already as good as
 the next on these photos, the rule says so.
 
-**Evidence** (:func:`evidence`, run by ``python -m export.benchmark``): the
+**Evidence** (:func:`evidence`, run by ``python -m export.studies.benchmark``): the
 shipped rule, frozen, on Des19 (per-photo relighting error of each tier and of
 auto, and seconds per photo measured on those photos in the same run), on
 ``card_blue_9lights`` (relighting of the 8 held-out photos) and on the real
@@ -33,7 +33,7 @@ import click
 import numpy as np
 import torch
 
-from export.evaluate import relight_rmse
+from export.studies.evaluate import relight_rmse
 from export.files import command_errors, write_json
 from svbrdf_cli.infer import auto as auto_tier
 from svbrdf_cli import conventions as cv
@@ -177,12 +177,12 @@ def calibrate(samples, chains=None, margin=MARGIN, repeat=5, log=print):
     auto_err = float(np.mean([errors[ladder[lv]][j] for j, lv in enumerate(levels)]))
     rule["calibration"] = {
         "data": f"export.data.dataset.make_batch, {len(samples)} photos at 256², seed {CALIBRATION_SEED}",
-        "metric": "re-rendering RMSE under 9 lights (export.evaluate.relight_rmse)",
+        "metric": "re-rendering RMSE under 9 lights (export.studies.evaluate.relight_rmse)",
         "margin": margin, "tier_error": {t: float(e.mean()) for t, e in errors.items()},
         "tier_seconds_256": cost, "signal_seconds_256": sig_cost,
         "auto_error": auto_err, "tiers_taken": {t: levels.count(i) for i, t in enumerate(ladder)},
         "steps": report, "cores": os.cpu_count(), "made": time.strftime("%Y-%m-%dT%H:%M:%S"),
-        "command": f"python -m export.auto_calibration --samples {len(samples)} --margin {margin}",
+        "command": f"python -m export.studies.auto_calibration --samples {len(samples)} --margin {margin}",
     }
     return rule
 
@@ -202,7 +202,7 @@ def evidence(rule, des19, nine=None, real=(), chains=None, log=print):
     maps, median of 3 runs on each of that set's photos, in this run), and the tiers auto took.
 
     ``des19``: [(name, (3, H, W) input, linear GT)]; ``nine``: a
-    :class:`export.benchmark.NineLights` or None; ``real``: network inputs
+    :class:`export.studies.benchmark.NineLights` or None; ``real``: network inputs
     without ground truth (cost and tiers only).
     """
     auto = auto_tier.AutoModel(rule, chains=chains)
