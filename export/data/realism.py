@@ -35,6 +35,7 @@ import numpy as np
 
 from export.files import shared_root
 from svbrdf_cli import conventions as cv
+from svbrdf_cli.imageops import luminance
 
 #: Real-photo sets under ``<shared>/data/real/``, in the default order.
 REAL_SETS = ("paper_real", "des18_real", "luo2024", "henzler_train")
@@ -75,7 +76,7 @@ STATISTICS = {
 # ----------------------------------------------------------------------------- statistics
 
 def _luma(img):
-    return img[..., :3] @ np.asarray(cv.LUMA)
+    return luminance(np.asarray(img[..., :3], np.float64), np.float64)
 
 
 def _noise_sigma(luma, valid, block):

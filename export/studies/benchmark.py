@@ -100,7 +100,7 @@ class NineLights:
 
     def network_input(self):
         """Photo 00 as the tool feeds it to the networks (auto exposure)."""
-        from svbrdf_cli.run.pipeline import network_input
+        from svbrdf_cli.infer.exposure import network_input
 
         return network_input(cv.image_to_linear(self.photos[0]))
 
@@ -131,7 +131,9 @@ class NineLights:
 
 def timings(method, repeat=5, big=2048, seed=0):
     """Seconds per image: the method at 256², and a ``big``² crop through the capture path to ``big``² maps."""
-    from svbrdf_cli.run.pipeline import NETWORK_SIZE, auto_exposure_gain, network_input, resize, upsample_maps
+    from svbrdf_cli.infer.exposure import NETWORK_SIZE, auto_exposure_gain, network_input
+    from svbrdf_cli.imageops import resize
+    from svbrdf_cli.infer.upsample import upsample_maps
     from svbrdf_cli.ingest.photo import encode_for_network
 
     rng = np.random.default_rng(seed)
@@ -291,7 +293,7 @@ def run(limit=None, repeat=5, figures="docs/figures", tables="docs/tables", stab
     log("paper  " + "  ".join(f"{k}={v:.4f}" for k, v in paper.items() if isinstance(v, float)))
     results = {"methods": rows, "samples": len(samples), "repeat": repeat, "cores": os.cpu_count()}
 
-    from svbrdf_cli.run.pipeline import network_input
+    from svbrdf_cli.infer.exposure import network_input
     from svbrdf_cli.infer.registry import DEFAULT_MODEL
 
     by_name = {m.name: m for m in methods}  # the sessions loaded above serve every part below

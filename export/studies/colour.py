@@ -77,7 +77,7 @@ def fidelity(photo, diffuse):
 
 def evaluate(methods, inputs, log=print):
     """{method: [fidelity row per photo]} for ``inputs`` = [(name, network input)] (the real photos
-    cropped and exposed as ``svbrdf capture`` does: :func:`svbrdf_cli.run.pipeline.network_input`)."""
+    cropped and exposed as ``svbrdf capture`` does: :func:`svbrdf_cli.infer.exposure.network_input`)."""
     out = {}
     for m in methods:
         rows = []
@@ -118,7 +118,7 @@ def cli(tables):
     from export.studies import stability
     from export.files import shared_root
 
-    from svbrdf_cli.run.pipeline import network_input
+    from svbrdf_cli.infer.exposure import network_input
 
     real = stability.real_crops(shared_root() / "data" / "real", stability.REAL_PHOTOS)
     res = evaluate(method_zoo.available(), [(name, network_input(lin)) for name, lin in real], log=click.echo)

@@ -52,6 +52,7 @@ def ratios(photo_path, size, chain, model="physical", upsample="guided", refine=
     ``chain`` (:func:`svbrdf_cli.infer.registry.load_model` of ``model``)."""
     from svbrdf_cli.ingest import photo as ingest
     from svbrdf_cli.run import pipeline
+    from svbrdf_cli import imageops
     from svbrdf_cli.imageio import read_image
 
     opts = pipeline.Options(size=size, upsample=upsample, refine=refine, preview=False, force=True)
@@ -59,7 +60,7 @@ def ratios(photo_path, size, chain, model="physical", upsample="guided", refine=
     with tempfile.TemporaryDirectory() as out:
         folder, record = pipeline.capture(prepared, chain, out, opts, model_name=model)
         side = record["size"]
-        photo = ingest.encode_for_network(pipeline.resize(prepared.crop.image, side) * np.float32(2.0 ** prepared.gain_ev))
+        photo = ingest.encode_for_network(imageops.resize(prepared.crop.image, side) * np.float32(2.0 ** prepared.gain_ev))
         ref = high_frequency(photo @ np.asarray(cv.LUMA, np.float32))
         res = {"size": side}
         for name in cv.MAP_NAMES:

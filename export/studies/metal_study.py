@@ -33,6 +33,7 @@ import click
 import numpy as np
 
 from svbrdf_cli import conventions as cv
+from svbrdf_cli.imageops import luminance
 from svbrdf_cli.infer import physical as ph
 
 #: Features the regression uses (:func:`features` names).
@@ -87,15 +88,15 @@ def features(image, geo=None):
     geo = geo or ph.Geometry()
     im = np.asarray(image, np.float32)
     lin = cv.image_to_linear(im).astype(np.float32)
-    lum = ph._luma(lin)
+    lum = luminance(lin)
     h, w = lum.shape
-    x, y = ph._grid(h, w)
+    x, y = ph.surface_grid(h, w)
     foot = ph.flash_foot(lum, x, y)
     rho = np.sqrt((x - foot[0]) ** 2 + (y - foot[1]) ** 2)
     clipped = (im >= ph.CLIPPED).any(-1)
     fd = ph.fit_lobe(lum, clipped, rho, geo, metals=False)
     p = geo.intensity
-    r, prof, wts = ph._profile(lum, clipped, rho)
+    r, prof, wts = ph.ring_profile(lum, clipped, rho)
     unb = {"m0": 0.0, "m1": 0.0, "res_u": 1.0, "res_l": 1.0, "r_l": ph.DEFAULT_ROUGHNESS}
     if len(r) >= 6:
         t = ph.lobe_terms(r, prof, wts, geo)
@@ -194,7 +195,7 @@ def study(log=print, model_dir=None):
             f"{int((~metal).sum())} dielectrics, {f0[metal].min():.3f}-{f0[metal].max():.3f} on the {int(metal.sum())} "
             f"metals | |F0 error| {np.abs(gt - f0).mean():.4f} (F0 = 0.04 everywhere: {np.abs(gt - cv.DIELECTRIC_F0).mean():.4f})")
     from svbrdf_cli.ingest import photo as ingest
-    from svbrdf_cli.run import pipeline
+    from svbrdf_cli.infer import exposure
     from svbrdf_cli.rectify import crops as rectify
 
     names, rows, images = [], [], []
@@ -206,7 +207,7 @@ def study(log=print, model_dir=None):
         except Exception:  # noqa: BLE001 (a photo the crop refuses is left out of the count)
             continue
         names.append(os.path.relpath(path, root / "data" / "real"))
-        image = pipeline.network_input(lin)
+        image = exposure.network_input(lin)
         rows.append(features(image))
         if network is not None:  # (only then: 267 photos at 256 px are 200 MB)
             images.append(image)

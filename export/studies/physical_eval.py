@@ -97,7 +97,8 @@ def highlight_figure(photos, path, size=512, tile=256):
     from export.render.figure import captioned_tile
     from svbrdf_cli.ingest import photo as ingest
     from svbrdf_cli.imageio import write_image
-    from svbrdf_cli.run.pipeline import Options, prepare, resize
+    from svbrdf_cli.run.pipeline import Options, prepare
+    from svbrdf_cli.imageops import resize
 
     rows = []
     for photo in photos:

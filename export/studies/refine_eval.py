@@ -167,7 +167,8 @@ def figure(photos, path, iterations=refine.DEFAULT_ITERATIONS, tile=192, side_li
     estimate's and the refined diffuse, normal and roughness, and both rendered under a side light."""
     from export.render.figure import captioned_tile
     from svbrdf_cli.imageio import read_image, write_image
-    from svbrdf_cli.run.pipeline import network_input, resize
+    from svbrdf_cli.infer.exposure import network_input
+    from svbrdf_cli.imageops import resize
     from svbrdf_cli.shading import render_maps
 
     method = method_zoo.Physical()

@@ -33,7 +33,7 @@ from export.studies.evaluate import score
 from export.render.brdf import render_maps
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.infer import tta
-from svbrdf_cli.run.pipeline import network_input
+from svbrdf_cli.infer.exposure import network_input
 from svbrdf_cli.write.mapset import stored_to_linear, write_map_set
 
 MAPS = cv.MAP_NAMES
@@ -153,7 +153,8 @@ def real_crops(real_root, count):
     """[(name, linear crop at network size)] of :func:`real_photos`, cropped as ``svbrdf capture`` does."""
     from svbrdf_cli.ingest import photo as ingest
     from svbrdf_cli.rectify import crops as rectify
-    from svbrdf_cli.run.pipeline import NETWORK_SIZE, resize
+    from svbrdf_cli.infer.exposure import NETWORK_SIZE
+    from svbrdf_cli.imageops import resize
 
     out = []
     for path in real_photos(real_root, count):

@@ -5,7 +5,7 @@
 
 Ground-truth maps at ``--size`` are rendered into a flash photo with the
 runtime's renderer. Two low-resolution sources are upsampled back to
-``--size`` with each method of :func:`svbrdf_cli.run.pipeline.upsample_maps`:
+``--size`` with each method of :func:`svbrdf_cli.infer.upsample.upsample_maps`:
 
 * **ideal**: the ground truth area-downsampled to 256 (a perfect network),
   so only the upsampling is measured;
@@ -23,7 +23,9 @@ import time
 import click
 import numpy as np
 
-from svbrdf_cli.run import pipeline
+from svbrdf_cli import imageops
+from svbrdf_cli.infer import exposure
+from svbrdf_cli.infer import upsample
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.write.mapset import linear_to_stored
 from svbrdf_cli.shading import render_maps
@@ -75,12 +77,12 @@ def cli(size, model, shared, limit):
         names.append(name)
         maps = {k: np.asarray(maps[k], np.float64) for k in cv.MAP_NAMES}
         lin = render_maps(maps, light=cv.FLASH_POSITION)
-        gain = 2.0 ** pipeline.auto_exposure_gain(pipeline.resize(lin.astype(np.float32), pipeline.NETWORK_SIZE))
+        gain = 2.0 ** exposure.auto_exposure_gain(imageops.resize(lin.astype(np.float32), exposure.NETWORK_SIZE))
         high = cv.image_to_encoded(lin * gain).astype(np.float32)
-        low = pipeline.resize(high, pipeline.NETWORK_SIZE)
+        low = imageops.resize(high, exposure.NETWORK_SIZE)
         gt = {k: v.astype(np.float32) for k, v in linear_to_stored(maps).items()}
         gt["roughness"] = gt["roughness"][..., :1]
-        gt_low = {k: pipeline.resize(v, pipeline.NETWORK_SIZE) for k, v in gt.items()}
+        gt_low = {k: imageops.resize(v, exposure.NETWORK_SIZE) for k, v in gt.items()}
         lows = {"ideal": gt_low}
         if chain:
             out = chain(low)
@@ -90,7 +92,7 @@ def cli(size, model, shared, limit):
                 err[(s, "at 256", k)].append(_rmse(src[k], gt_low[k]))
             for m in METHODS:
                 t0 = time.perf_counter()
-                up = pipeline.upsample_maps(src, low, high, m)
+                up = upsample.upsample_maps(src, low, high, m)
                 secs[m].append(time.perf_counter() - t0)
                 for k in cv.MAP_NAMES:
                     err[(s, m, k)].append(_rmse(up[k], gt[k]))

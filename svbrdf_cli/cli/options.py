@@ -14,7 +14,8 @@ from svbrdf_cli.run.batch import Job
 from svbrdf_cli.errors import OutputExistsError
 from svbrdf_cli.infer.registry import DEFAULT_MODEL
 from svbrdf_cli.cli.values import corners, exposure, light, numbers
-from svbrdf_cli.run.pipeline import MAX_SIZE, MIN_SIZE, UPSAMPLE_METHODS, Options
+from svbrdf_cli.run.pipeline import MAX_SIZE, MIN_SIZE, Options
+from svbrdf_cli.infer.upsample import UPSAMPLE_METHODS
 from svbrdf_cli.write.presets import FORMATS, PNG_BITS, PNG_ONLY_PRESETS, PRESETS
 from svbrdf_cli.rectify.crops import CROP_MODES
 from svbrdf_cli.infer.refine import DEFAULT_ITERATIONS, MAX_ITERATIONS

@@ -4,7 +4,7 @@ import math
 
 import click
 
-from svbrdf_cli.run.pipeline import MAX_EXPOSURE_STOPS
+from svbrdf_cli.infer.exposure import MAX_EXPOSURE_STOPS
 
 
 def numbers(count, what, positive=False):

@@ -49,6 +49,8 @@ import types
 import numpy as np
 
 from svbrdf_cli import conventions as cv
+from svbrdf_cli import imageops
+from svbrdf_cli.imageops import blur, fill_from_surroundings, luminance, push_pull
 from svbrdf_cli.rectify import highlight
 
 #: Bumped whenever the estimate's output changes: a network trained to refine one version
@@ -161,17 +163,8 @@ class Geometry:
     foot: tuple | None = None      # (x, y) under the flash; None: found from the photo
 
 
-def _luma(x):
-    return x @ np.asarray(cv.LUMA, np.float32)
-
-
-def _blur(x, sigma):
-    import cv2
-
-    return cv2.GaussianBlur(np.ascontiguousarray(x, np.float32), (0, 0), float(sigma), borderType=cv2.BORDER_REFLECT)
-
-
-def _grid(h, w):
+def surface_grid(h, w):
+    """(x, y) surface positions of an (h, w) image's pixels: two (h, w) float32 arrays."""
     p = cv.surface_positions(h, w)
     return p[..., 0].astype(np.float32), p[..., 1].astype(np.float32)
 
@@ -185,7 +178,7 @@ def flash_foot(lum, x, y, limit=0.8):
 
     Args:
         lum: (H, W) linear brightness.
-        x, y: (H, W) surface positions of the pixels (:func:`_grid`).
+        x, y: (H, W) surface positions of the pixels (:func:`surface_grid`).
         limit: the foot is kept within +-``limit`` (a fit on a surface with no
             visible falloff can wander).
     """
@@ -194,8 +187,8 @@ def flash_foot(lum, x, y, limit=0.8):
         import cv2             # blur of a tenth of 2048 px would cost seconds)
 
         small = cv2.resize(np.ascontiguousarray(lum, np.float32), (FOOT_SIDE, FOOT_SIDE), interpolation=cv2.INTER_AREA)
-        return flash_foot(small, *_grid(FOOT_SIDE, FOOT_SIDE), limit=limit)
-    b = _blur(np.maximum(lum, 1e-6), max(h, w) / 10.0)
+        return flash_foot(small, *surface_grid(FOOT_SIDE, FOOT_SIDE), limit=limit)
+    b = blur(np.maximum(lum, 1e-6), max(h, w) / 10.0)
     step = max(1, min(h, w) // 48)
     xs, ys, z = x[::step, ::step].ravel(), y[::step, ::step].ravel(), np.log(b[::step, ::step]).ravel()
     a = np.stack([np.ones_like(xs), xs, ys, xs * xs + ys * ys], 1).astype(np.float64)
@@ -229,16 +222,9 @@ class Lobe:
     gain: float          # fraction of the flat-profile residual the fit explains
 
 
-def _rings(rho, count):
-    """Equal-width rings of ``rho`` (distance to the foot) out to its maximum: (ring of each pixel, flat;
-    ring centres)."""
-    edges = np.linspace(0.0, float(rho.max()) + 1e-6, count + 1)
-    return np.clip(np.digitize(rho.ravel(), edges) - 1, 0, count - 1), 0.5 * (edges[:-1] + edges[1:])
-
-
-def _profile(lum, clipped, rho):
+def ring_profile(lum, clipped, rho):
     """Ring-averaged ``lum`` around the flash foot: (radii, means, pixel counts) of usable rings."""
-    ring, centres = _rings(rho, PROFILE_RINGS)
+    ring, centres = imageops.rings(rho, PROFILE_RINGS)
     good = ~clipped.ravel()
     n = np.bincount(ring[good], minlength=PROFILE_RINGS).astype(np.float64)
     total = np.bincount(ring, minlength=PROFILE_RINGS).astype(np.float64)
@@ -256,7 +242,7 @@ def shading_at(rho, height, ref_height):
 
 def lobe_terms(rho, prof, wts, geo):
     """Every (height, roughness) pair of :data:`HEIGHT_GRID` x :data:`ROUGHNESS_GRID` at once, at the ring
-    profile ``(rho, prof, wts)`` (:func:`_profile`): ``heights`` (H,), the flat surface's falloff ``s``
+    profile ``(rho, prof, wts)`` (:func:`ring_profile`): ``heights`` (H,), the flat surface's falloff ``s``
     (H, 1, N), the lobe ``g`` (H, R, N), the ring weights ``w`` (1, 1, N), the sums ``sss = sum w s s`` and
     ``sy = sum w s prof``, and the unconstrained 2x2 least squares ``prof = m0 s + m1 g``
     (``m0``, ``m1``: (H, R)), which every hypothesis about the profile starts from."""
@@ -285,7 +271,7 @@ def fit_lobe(lum, clipped, rho, geo, metals=False):
     height is fitted, only the diffuse level is read at the convention's flash power.
     """
     P = geo.intensity
-    rho, prof, wts = _profile(lum, clipped, rho)
+    rho, prof, wts = ring_profile(lum, clipped, rho)
     if len(rho) < 6:
         return Lobe(DEFAULT_ROUGHNESS, float(np.median(lum / (geo.height ** -2))), cv.DIELECTRIC_F0 * P,
                     geo.height, False, 0.0)
@@ -329,8 +315,8 @@ def flatten_radial(diffuse, rho, rings=PROFILE_RINGS // 2, weights=None):
     ``weights`` (H, W) in [0, 1], when given, restrict both the trend and its removal to a class of
     pixels (in proportion): e.g. the greys, whose highlight was taken off by the lobe's share.
     """
-    logl = np.log(np.maximum(_luma(diffuse), 1e-5)).ravel().astype(np.float64)
-    ring, centres = _rings(rho, rings)
+    logl = np.log(np.maximum(luminance(diffuse), 1e-5)).ravel().astype(np.float64)
+    ring, centres = imageops.rings(rho, rings)
     wt = np.ones(logl.shape) if weights is None else np.asarray(weights, np.float64).ravel()
     n = np.bincount(ring, weights=wt, minlength=rings)
     if weights is not None:
@@ -349,63 +335,6 @@ def flatten_radial(diffuse, rho, rings=PROFILE_RINGS // 2, weights=None):
     if weights is not None:
         trend = trend * weights
     return (diffuse * np.exp(-trend)[..., None]).astype(np.float32)
-
-
-def push_pull(values, weights, confident=1.0, until_covered=False, fallback=0.0):
-    """Weighted push-pull of ``values`` (H, W) or (H, W, C) by ``weights`` (H, W) in [0, 1].
-
-    Weighted averages on a pyramid of halvings (INTER_AREA), then back up: each level keeps its own
-    weighted average in proportion to its weight (fully from ``confident``) and takes the coarser
-    level's elsewhere. A pixel with weight keeps its local average; one without takes the nearest
-    weighted region's, smoothly. ``until_covered`` stops the halving once every pixel of a level
-    has some weight (a fill); otherwise it goes down to one pixel (a spread). ``fallback``: the
-    value where even the coarsest level has no weight.
-    """
-    import cv2
-
-    channels = values.ndim == 3
-
-    def per_pixel(d):
-        return d[..., None] if channels else d
-
-    num = np.ascontiguousarray(values * per_pixel(weights), np.float32)
-    den = np.ascontiguousarray(weights, np.float32)
-    pyramid = [(num, den)]
-    while min(den.shape) > (2 if until_covered else 1) and (not until_covered or float(den.min()) <= 0.0):
-        h, w = den.shape
-        size = (max(1, w // 2), max(1, h // 2))
-        num = cv2.resize(num, size, interpolation=cv2.INTER_AREA).reshape(size[1], size[0], *values.shape[2:])
-        den = cv2.resize(den, size, interpolation=cv2.INTER_AREA)
-        pyramid.append((num, den))
-    num, den = pyramid[-1]
-    out = np.where(per_pixel(den) > 0, num / np.maximum(per_pixel(den), 1e-12), fallback)
-    for num, den in reversed(pyramid[:-1]):
-        h, w = den.shape
-        up = cv2.resize(np.ascontiguousarray(out, np.float32), (w, h), interpolation=cv2.INTER_LINEAR).reshape(num.shape)
-        c = np.clip(den / confident, 0.0, 1.0)
-        own = np.divide(c, den, out=np.zeros_like(den), where=den > 0)  # 1 where fully confident
-        out = num * per_pixel(own) + per_pixel(1.0 - c) * up  # c x its own average + (1 - c) x the coarser
-    return out
-
-
-def fill_from_surroundings(x, mask, detail=None):
-    """``x`` (H, W, C) with the pixels of ``mask`` replaced from their surroundings by push-pull
-    (:func:`push_pull` of the unmasked pixels): a smooth fill, without the radial streaks of
-    boundary-marching inpainting; ``detail`` (H, W), when given, multiplies the fill: the photo's
-    own relative texture where it still has one."""
-    import cv2
-
-    if not mask.any():
-        return x
-    m = cv2.dilate(mask.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)  # the halo goes too
-    keep = (~m).astype(np.float32)
-    if not keep.any():
-        return x
-    x = np.asarray(x, np.float32)
-    fill = push_pull(x, keep, until_covered=True, fallback=x[~m].mean(0))
-    if detail is not None:
-        fill = fill * detail[..., None]
-    return np.where(m[..., None], fill, x).astype(np.float32)
 
 
 def _channel_min_max(x):
@@ -517,7 +446,7 @@ def highlight_residue(diffuse, blob):
     area = cv2.dilate(blob.mask.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))).astype(bool)
     if area.all() or not area[blob.peak]:
         return none
-    ld = _blur(_luma(diffuse), max(1.0, w / 256.0))  # not single noisy pixels
+    ld = blur(luminance(diffuse), max(1.0, w / 256.0))  # not single noisy pixels
     around = push_pull(ld, (~area).astype(np.float32), until_covered=True, fallback=float(ld.mean()))
     bright = area & (ld > (1.0 + RESIDUE_LEVEL) * around)
     _, labels = cv2.connectedComponents(bright.astype(np.uint8))
@@ -537,13 +466,13 @@ def _relative_texture(lum):
     """(H, W) brightness over its neighbourhood's (1/64 of the width), within :data:`DETAIL_RANGE`: the
     texture a fill is multiplied by so that it is not a flat, textureless blot."""
     w = lum.shape[1]
-    return np.clip(lum / np.maximum(_blur(lum, max(1.0, w / 64.0)), 1e-6), 1.0 / DETAIL_RANGE, DETAIL_RANGE)
+    return np.clip(lum / np.maximum(blur(lum, max(1.0, w / 64.0)), 1e-6), 1.0 / DETAIL_RANGE, DETAIL_RANGE)
 
 
 def _texture_beside(diffuse, spot):
     """(H, W) relative texture (:func:`_relative_texture`) of ``diffuse`` just beside ``spot``, moved onto it."""
     cols = np.flatnonzero(spot.any(0))
-    return np.roll(_relative_texture(_luma(diffuse)), int(cols[-1] - cols[0]) + 3, axis=1).astype(np.float32)
+    return np.roll(_relative_texture(luminance(diffuse)), int(cols[-1] - cols[0]) + 3, axis=1).astype(np.float32)
 
 
 def _residue_spot(img, diffuse):
@@ -570,7 +499,7 @@ def specular_map(fit, lin, clipped, dominated, intensity):
         dom = dominated & ~clipped
         highlight_rgb = lin[dom].mean(0) if dom.sum() >= 8 else np.ones(3, np.float32)
         tint = highlight_rgb / max(float(highlight_rgb.max()), 1e-6)
-        return np.clip(fit.specular / intensity * tint / max(float(_luma(tint[None])[0]), 1e-6),
+        return np.clip(fit.specular / intensity * tint / max(float(luminance(tint[None])[0]), 1e-6),
                        cv.DIELECTRIC_F0, 1.0).astype(np.float32)
     return np.full(3, cv.DIELECTRIC_F0, np.float32)
 
@@ -596,8 +525,8 @@ def normal_map(lum_albedo, light_xy, light_z, strength=None, scale=HEIGHT_SCALE)
     if strength == 0:  # (the default) flat: nothing to read from the shading
         return np.concatenate([np.zeros((h, w, 2), np.float32), np.ones((h, w, 1), np.float32)], -1)
     lum = np.maximum(lum_albedo, 1e-4).astype(np.float32)
-    r = lum / _blur(lum, max(1.0, scale * 8 * w)) - 1.0
-    r = _blur(r, max(0.5, w / 512.0))
+    r = lum / blur(lum, max(1.0, scale * 8 * w)) - 1.0
+    r = blur(r, max(0.5, w / 512.0))
     k = (strength * r * light_z / ((light_xy ** 2).sum(-1) + TILT_EPS))[..., None]
     n = np.concatenate([k * light_xy, np.ones((h, w, 1), np.float32)], -1)
     return cv.normalize(n).astype(np.float32)
@@ -624,8 +553,8 @@ def estimate(image, geo=None, normal_strength=None, with_fit=False, metals=None)
     lin = cv.image_to_linear(img).astype(np.float32)
     level = cv.clip_level(img)  # a clipped highlight darkened by the exposure is clipped all the same
     clipped = (img >= CLIPPED * level).any(-1)
-    lum = _luma(lin)
-    x, y = _grid(h, w)
+    lum = luminance(lin)
+    x, y = surface_grid(h, w)
     foot = geo.foot if geo.foot is not None else flash_foot(lum, x, y)
     rho = np.sqrt((x - foot[0]) ** 2 + (y - foot[1]) ** 2)
     # The lobe fit leaves out only what clipped at the camera's white: a plateau the exposure moved down
@@ -649,7 +578,7 @@ def estimate(image, geo=None, normal_strength=None, with_fit=False, metals=None)
     # so the hue stays the photo's) rather than the pixel being scaled, which would leave the
     # highlight's whiteness in the diffuse (a pale disc, and greyer colours).
     share = (spec_rad / np.maximum(model, 1e-6))[..., None]
-    tint = f0 / max(float(_luma(f0[None])[0]), 1e-6)  # the highlight's colour (white but for a metal)
+    tint = f0 / max(float(luminance(f0[None])[0]), 1e-6)  # the highlight's colour (white but for a metal)
     white = np.minimum(share * lum[..., None], (1.0 - SUBTRACT_FLOOR) * (lin / tint).min(-1, keepdims=True))
     base = lin - white * tint
     bad = clipped | (share[..., 0] > HIGHLIGHT_SHARE)  # what is left there is mostly the highlight's
@@ -661,11 +590,11 @@ def estimate(image, geo=None, normal_strength=None, with_fit=False, metals=None)
         near = _channel_min_max(img)[1] >= NEAR_CLIPPED * level
         by_colour, coloured = separate_by_colour(lin, share[..., 0], tint, near, reference=base)
         # only where the colour says there is a highlight (a ramp, so no edge shows), near the flash
-        taken = 1.0 - _luma(by_colour) / np.maximum(lum, 1e-6)
+        taken = 1.0 - luminance(by_colour) / np.maximum(lum, 1e-6)
         trust = (coloured * np.clip((taken - COLOUR_RAMP[0]) / (COLOUR_RAMP[1] - COLOUR_RAMP[0]), 0.0, 1.0)
                  * np.clip(share[..., 0] / 0.02, 0.0, 1.0))
         # a pixel the highlight dominates keeps too little of its colour to read: filled from around it
-        dominated = (trust > 0.5) & (_luma(by_colour) < (1.0 - HIGHLIGHT_SHARE) * lum)
+        dominated = (trust > 0.5) & (luminance(by_colour) < (1.0 - HIGHLIGHT_SHARE) * lum)
         base = trust[..., None] * by_colour + (1.0 - trust[..., None]) * base
         flat_fill = clipped | (near & (share[..., 0] > 0.05)) | dominated
         bad = flat_fill | ((share[..., 0] > HIGHLIGHT_SHARE) & (trust < 0.5))
@@ -685,7 +614,7 @@ def estimate(image, geo=None, normal_strength=None, with_fit=False, metals=None)
     diffuse = flatten_radial(diffuse, rho)
     diffuse = np.clip(np.nan_to_num(diffuse, nan=0.0, posinf=1.0), 0.0, 1.0).astype(np.float32)
     light_xy = np.stack([foot[0] - x, foot[1] - y], -1) / d[..., None]
-    normal = normal_map(_luma(diffuse), light_xy.astype(np.float32), (fit.height / d).astype(np.float32),
+    normal = normal_map(luminance(diffuse), light_xy.astype(np.float32), (fit.height / d).astype(np.float32),
                         strength=normal_strength)
     stored = {"normal": cv.encode_normals(normal).astype(np.float32),
               "diffuse": cv.albedo_to_stored(diffuse).astype(np.float32),

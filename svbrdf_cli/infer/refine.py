@@ -42,6 +42,8 @@ import time
 import numpy as np
 
 from svbrdf_cli import conventions as cv
+from svbrdf_cli import imageops
+from svbrdf_cli.imageops import luminance
 from svbrdf_cli import shading
 
 #: Iterations of ``--refine`` given without a number (and of ``svbrdf capture`` without ``--refine``).
@@ -152,8 +154,6 @@ FILL_UNOBSERVED = True
 #: photos; blurring the normal map alone took the outline away). Card 0.1221 either way, 32 generated
 #: photos' relight 0.0771 -> 0.0762, Des19 normal 0.0586 -> 0.0587 and held-out relight 0.0574 -> 0.0575.
 FILLED = ("tilt", "diffuse", "roughness", "specular")
-#: Luminance weights, as the priors on F0's level use them (made once, not at every step).
-_LUMA = np.asarray(cv.LUMA, np.float32)
 
 
 @dataclasses.dataclass
@@ -162,14 +162,9 @@ class Result:
     report: dict            # JSON-able: iterations, photo loss before/after, intensity, seconds
 
 
-def _resize(x, side):
-    import cv2
-
-    if x.shape[0] == side:
-        return x
-    interp = cv2.INTER_AREA if side < x.shape[0] else cv2.INTER_LINEAR
-    out = cv2.resize(np.ascontiguousarray(x, np.float32), (side, side), interpolation=interp)
-    return out.reshape(side, side, -1)
+def _at(x, side):
+    """(H, W, C) ``x`` at ``side``² (:func:`svbrdf_cli.imageops.resize`, bilinear up; float32)."""
+    return imageops.resize(np.asarray(x, np.float32), side, up="linear")
 
 
 def _robust(e):
@@ -217,10 +212,7 @@ def _smoothness(x):
 
 
 def _broad(x):
-    import cv2
-
-    s = BROAD_SIGMA * x.shape[0]
-    return cv2.GaussianBlur(np.ascontiguousarray(x, np.float32), (0, 0), s, borderType=cv2.BORDER_REFLECT).reshape(x.shape)
+    return imageops.blur(x, BROAD_SIGMA * x.shape[0]).reshape(x.shape)
 
 
 def _maps(p):
@@ -272,9 +264,9 @@ class _Problem:
             total += pr.up_broad * float((b * b).sum()) / (2 * n)
             g["tilt"] += pr.up_broad * 2.0 * _broad(b) / (2 * n)
         # the dielectric prior holds F0's level (its luminance), not its colour (see Priors.dielectric)
-        ds = p["specular"] @ _LUMA - cv.DIELECTRIC_F0
+        ds = luminance(p["specular"]) - cv.DIELECTRIC_F0
         total += pr.dielectric * float((ds * ds).sum()) / n
-        g["specular"] += pr.dielectric * 2.0 * ds[..., None] * _LUMA / n
+        g["specular"] += pr.dielectric * 2.0 * ds[..., None] * imageops.LUMA32 / n
         for key, w in (("roughness", pr.smooth_roughness), ("specular", pr.smooth_specular)):
             val, gs = _smoothness(p[key])
             total += w * val * self.smooth_scale
@@ -305,12 +297,10 @@ def _spec_change(change, tint):
 
 def _radial(side, centre, rings=RADIAL_RINGS):
     """(distance of each pixel to ``centre`` (H, W), ring centres, ring of each pixel (flat), pixels per
-    ring) at ``side``², the rings of :func:`svbrdf_cli.infer.physical._rings`; made once per level."""
-    from svbrdf_cli.infer.physical import _rings
-
+    ring) at ``side``², the rings of :func:`svbrdf_cli.imageops.rings`; made once per level."""
     p = cv.surface_positions(side, side)
     rho = np.hypot(p[..., 0] - centre[0], p[..., 1] - centre[1]).astype(np.float32)
-    ring, centres = _rings(rho, rings)
+    ring, centres = imageops.rings(rho, rings)
     return rho, centres, ring, np.bincount(ring, minlength=rings).astype(np.float64)
 
 
@@ -351,7 +341,7 @@ def _project(p):
     p["roughness"] = np.clip(p["roughness"], *ROUGHNESS_RANGE)
     p["specular"] = np.clip(p["specular"], *SPECULAR_RANGE)
     if SPECULAR_FLOOR:  # grey added to every pixel when the map's mean luminance is under the floor
-        short = SPECULAR_FLOOR - float((p["specular"] @ _LUMA).mean())
+        short = SPECULAR_FLOOR - float((luminance(p["specular"])).mean())
         if short > 0:
             p["specular"] = np.clip(p["specular"] + np.float32(short), *SPECULAR_RANGE)
 
@@ -369,16 +359,15 @@ def fit_intensity(photo_lin, params, geometry, weight=None):
 
 def _fill_unobserved(start, p, unobserved, radial=None):
     """``p`` with its change from ``start`` (:data:`FILLED`: tilt, diffuse, roughness, F0) at the ``unobserved`` pixels (the
-    photo clipped them) taken from their surroundings' change (:func:`svbrdf_cli.infer.physical.fill_from_surroundings`),
+    photo clipped them) taken from their surroundings' change (:func:`svbrdf_cli.imageops.fill_from_surroundings`),
     those of :data:`RADIAL_FREE` then freed of any radial trend again (``radial``: :func:`_radial`). The photo
     term is per pixel, so the fill leaves it as it is; see :data:`FILL_UNOBSERVED`."""
-    from svbrdf_cli.infer.physical import fill_from_surroundings
 
     if not unobserved.any() or unobserved.all():
         return p
     out = dict(p)
     for k in FILLED:
-        change = fill_from_surroundings(p[k] - start[k], unobserved)
+        change = imageops.fill_from_surroundings(p[k] - start[k], unobserved)
         if radial is not None and k in RADIAL_FREE:
             change = _without_radial_trend(change, radial)
         out[k] = (start[k] + change).astype(np.float32)
@@ -415,13 +404,13 @@ def refine(image, stored, geometry, iterations=DEFAULT_ITERATIONS, priors=None, 
     plan = [(max(8, int(round(side * f))), int(round(iterations * share))) for f, share in LEVELS]
     plan[-1] = (side, iterations - sum(n for _, n in plan[:-1]))
     for s, steps in plan:
-        init = {k: _resize(v, s) for k, v in start.items()}
+        init = {k: _at(v, s) for k, v in start.items()}
         # a coarser level's weight is the full size's averaged (INTER_AREA): fractional at the clipped region's
         # edge, not a mask of its own whose staircase of coarse pixels the finer levels inherit
-        prob = full if s == side else _Problem(_resize(photo, s), init, geometry, intensity, priors, side,
-                                               weight=_resize(full.weight, s) if SOFT_LEVELS else None)
+        prob = full if s == side else _Problem(_at(photo, s), init, geometry, intensity, priors, side,
+                                               weight=_at(full.weight, s) if SOFT_LEVELS else None)
         delta = {k: np.zeros_like(v) for k, v in init.items()} if delta is None else \
-            {k: _resize(v, s) for k, v in delta.items()}
+            {k: _at(v, s) for k, v in delta.items()}
         tint = _tint(init["diffuse"])
         radial = _radial(s, geometry.highlight[:2]) if NO_RADIAL_TREND else None
         m1 = {k: np.zeros_like(v) for k, v in delta.items()}
@@ -483,7 +472,7 @@ def transfer(start, refined, target):
     """
     a, b, t = (_params({k: np.asarray(v, np.float32) for k, v in m.items()}) for m in (start, refined, target))
     side = t["tilt"].shape[0]
-    p = {k: (t[k] + _resize(b[k] - a[k], side)).astype(np.float32) for k in t}
+    p = {k: (t[k] + _at(b[k] - a[k], side)).astype(np.float32) for k in t}
     _project(p)
     out = _stored(p)
     out["roughness"] = out["roughness"][..., :1]

@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from svbrdf_cli import conventions as cv
+from svbrdf_cli.imageops import resize_to
 
 #: The 8 symmetries of the square as (quarter turns counter-clockwise, mirrored first).
 DIHEDRAL = tuple((k, m) for m in (False, True) for k in range(4))
@@ -90,3 +91,10 @@ def disagreement(results):
 def confidence(results, half=CONFIDENCE_HALF):
     """{map: (H, W) confidence in (0, 1]}: 1 where the passes agree, 0.5 at a disagreement of ``half``."""
     return {name: (1.0 / (1.0 + (d / half) ** 2)).astype(np.float32) for name, d in disagreement(results).items()}
+
+
+def confidence_maps(chain, net_in, stored, side):
+    """{map: (side, side) confidence} from :data:`CONFIDENCE_PASSES` (``stored``: the plain pass)."""
+    conf = confidence([stored] + passes(chain, net_in, CONFIDENCE_PASSES[1:]))
+    return {k: v if v.shape[0] == side else np.clip(resize_to(v[..., None], (side, side))[..., 0], 0, 1)
+            for k, v in conf.items()}

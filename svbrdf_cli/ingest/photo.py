@@ -10,13 +10,14 @@ as the camera meant it (EXIF orientation applied), whatever the file:
 
 Grey images are repeated to three channels, alpha is dropped. The networks
 take the photo exposed, clipped and encoded as training images are
-(:func:`encode_for_network`, through :func:`svbrdf_cli.run.pipeline.network_input`).
+(:func:`encode_for_network`, through :func:`svbrdf_cli.infer.exposure.network_input`).
 """
 
 from __future__ import annotations
 
 import contextlib
 import dataclasses
+import hashlib
 import logging
 import os
 import tempfile
@@ -370,3 +371,11 @@ def _srgb8_to_linear(rgb):
     import cv2
 
     return cv2.LUT(rgb, _SRGB8_TO_LINEAR)
+
+
+def file_sha256(path):
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()

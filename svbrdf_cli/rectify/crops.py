@@ -27,6 +27,7 @@ import logging
 import numpy as np
 
 from svbrdf_cli import conventions as cv
+from svbrdf_cli.imageops import luminance
 from svbrdf_cli.errors import SvbrdfError
 
 log = logging.getLogger("svbrdf")
@@ -213,10 +214,6 @@ def _check_inside(quad, shape, what):
 # The four modes
 # --------------------------------------------------------------------------
 
-def _luminance(image):
-    return image @ np.asarray(cv.LUMA, np.float32)
-
-
 def find_highlight(image):
     """Where the flash highlight is: ((x, y) in pixels, strength), or None.
 
@@ -227,7 +224,7 @@ def find_highlight(image):
     """
     import cv2
 
-    lum = _luminance(image)
+    lum = luminance(image)
     h, w = lum.shape
     scale = 256.0 / max(h, w)
     small = cv2.resize(lum, (max(1, round(w * scale)), max(1, round(h * scale))), interpolation=cv2.INTER_AREA)
@@ -271,7 +268,7 @@ def auto_crop(image):
 
 def marker_crop(image):
     """Rectify the window of a photographed :func:`marker_sheet`."""
-    lum = _luminance(image)
+    lum = luminance(image)
     gray = (np.clip(lum / max(np.percentile(lum, 99), 1e-6), 0, 1) ** (1 / cv.IMAGE_GAMMA) * 255).astype(np.uint8)
     found = detect_markers(gray)
     try:

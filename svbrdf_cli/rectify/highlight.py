@@ -15,6 +15,7 @@ import dataclasses
 import numpy as np
 
 from svbrdf_cli import conventions as cv
+from svbrdf_cli.imageops import blur
 
 #: The blob: pixels of the blurred weakest channel above this fraction of the way from its median to
 #: its peak.
@@ -36,7 +37,7 @@ def find(image):
     lin = cv.image_to_linear(np.asarray(image, np.float32))
     lum = np.ascontiguousarray(lin.min(-1), np.float32)
     h, w = lum.shape
-    b = cv2.GaussianBlur(lum, (0, 0), max(1.0, w / 64.0), borderType=cv2.BORDER_REFLECT)
+    b = blur(lum, max(1.0, w / 64.0))
     peak = np.unravel_index(int(np.argmax(b)), b.shape)
     top, base = float(b[peak]), float(np.median(b))
     thr = base + BLOB_LEVEL * (top - base)

@@ -25,7 +25,6 @@ from __future__ import annotations
 import dataclasses
 import datetime
 import functools
-import hashlib
 import json
 import logging
 import os
@@ -38,21 +37,19 @@ from svbrdf_cli import conventions as cv
 from svbrdf_cli.ingest import photo as ingest
 from svbrdf_cli.rectify import crops as rectify
 from svbrdf_cli.errors import SvbrdfError
+from svbrdf_cli.imageops import resize
+from svbrdf_cli.infer.exposure import NETWORK_SIZE, auto_exposure_gain, network_input
+from svbrdf_cli.infer.tta import confidence_maps
+from svbrdf_cli.infer.upsample import upsample_maps
+from svbrdf_cli.write.preview import preview_image
 from svbrdf_cli.infer.refine import DEFAULT_ITERATIONS as DEFAULT_REFINE
 
 log = logging.getLogger("svbrdf")
 
-#: The networks' working resolution (exported and validated at it; trained on 128 px crops).
-NETWORK_SIZE = 256
 #: Output sizes accepted by ``--size``.
 MIN_SIZE, MAX_SIZE = 256, 4096
-#: The most ``--exposure`` may change a photo, in stops either way (2^20: beyond any real photo's need).
-MAX_EXPOSURE_STOPS = 20.0
 #: Default output size cap: the crop's own resolution, at most this.
 DEFAULT_SIZE = 1024
-#: Guided upsampling: window radius (network pixels) and regularisation.
-GUIDE_RADIUS = 1
-GUIDE_EPS = 1e-3
 #: Marker that a set is complete (the batch command skips such folders).
 RECORD = "material.json"
 
@@ -84,192 +81,10 @@ class Options:
 # Pieces
 # --------------------------------------------------------------------------
 
-def resize(image, side):
-    """Square image -> ``side`` x ``side`` (area filter down, bicubic up)."""
-    import cv2
-
-    if image.shape[0] == side and image.shape[1] == side:
-        return image
-    interp = cv2.INTER_AREA if side < image.shape[0] else cv2.INTER_CUBIC
-    out = cv2.resize(np.ascontiguousarray(image), (side, side), interpolation=interp)
-    return out[..., None] if out.ndim == 2 else out
-
-
-def auto_exposure_gain(linear, target=cv.AUTO_EXPOSURE_MEAN):
-    """Gain making the encoded image's mean ``target`` (what the networks were trained on)."""
-    lo, hi = -12.0, 12.0
-    flat = linear.reshape(-1, 3)[:: max(1, linear.size // 3 // 65536)]
-    if float(flat.max()) <= 0:
-        raise SvbrdfError("the crop is black")
-    for _ in range(30):
-        mid = (lo + hi) / 2
-        if cv.image_to_encoded(flat * np.float32(2.0 ** mid)).mean() < target:
-            lo = mid
-        else:
-            hi = mid
-    return (lo + hi) / 2
-
-
-def _box(x, r):
-    """Mean over (2r+1)^2 windows, reflecting at the borders; keeps the (h, w, C) shape."""
-    import cv2
-
-    return cv2.boxFilter(x, -1, (2 * r + 1, 2 * r + 1), borderType=cv2.BORDER_REFLECT).reshape(x.shape)
-
-
-def _resize_to(x, shape):
-    import cv2
-
-    return cv2.resize(x, (shape[1], shape[0]), interpolation=cv2.INTER_LINEAR).reshape(*shape, x.shape[-1])
-
-
-def guided_upsample(low, guide_low, guide_high, radius=GUIDE_RADIUS, eps=GUIDE_EPS, detail=None):
-    """Bicubic upsampling plus the photo's own fine detail, scaled by a local regression.
-
-    In each (2r+1)^2 window at network resolution the map is regressed on
-    the guide (slope ``a = cov(guide, map) / (var(guide) + eps)``, as in He
-    et al.'s guided filter); the upsampled map then gains ``a`` times the
-    guide's detail that the low resolution could not hold
-    (``guide_high - upsample(guide_low)``). Where the map does not follow
-    the photo's brightness, ``a`` is ~0 and this is plain bicubic.
-
-    Args:
-        low: (h, w, C) map at network resolution.
-        guide_low: (h, w) guide (the photo's encoded brightness) at that resolution.
-        guide_high: (H, W) the same guide at the output resolution (square).
-        detail: ``guide_high`` less the guide's bicubic upsampling, if the caller has it already.
-
-    Returns:
-        (H, W, C) float32.
-    """
-    low = np.ascontiguousarray(low, np.float32)
-    g = np.ascontiguousarray(guide_low, np.float32)[..., None]
-    mean_g = _box(g, radius)
-    var_g = _box(g * g, radius) - mean_g ** 2
-    cov = _box(np.ascontiguousarray(g * low), radius) - mean_g * _box(low, radius)
-    a = _box(np.ascontiguousarray(cov / (var_g + eps)), radius)
-    side = guide_high.shape[0]
-    if detail is None:
-        detail = guide_detail(guide_low, guide_high)
-    out = resize(low, side).reshape(side, side, -1)
-    a = _resize_to(a, guide_high.shape)
-    a *= detail[..., None]
-    out += a
-    return out
-
-
-def guide_detail(guide_low, guide_high):
-    """What the output-size guide holds beyond the bicubic upsampling of the network-size one."""
-    g = np.ascontiguousarray(guide_low, np.float32)[..., None]
-    return guide_high - resize(g, guide_high.shape[0])[..., 0]
-
-
-#: Maps that take the photo's detail in guided upsampling; the others are
-#: bicubic (measured: ``python -m export.studies.upsample_eval``, docs/capture.md).
-GUIDED_MAPS = ("normal", "diffuse")
-#: How maps reach the output size: guided by the photo (:data:`GUIDED_MAPS`), or plain bicubic.
-UPSAMPLE_METHODS = ("guided", "bicubic")
-
-
-def upsample_maps(stored, photo_low, photo_high, method="guided"):
-    """Stored-encoding maps at network resolution -> the output resolution.
-
-    ``photo_low`` / ``photo_high``: the encoded network input and the encoded
-    crop at the output size. ``method``: "guided" (:func:`guided_upsample`
-    for :data:`GUIDED_MAPS`, bicubic for the rest) or "bicubic".
-    """
-    side = photo_high.shape[0]
-    if stored["normal"].shape[0] == side:
-        return dict(stored)
-    if method not in UPSAMPLE_METHODS:
-        raise ValueError(f"unknown upsampling method {method!r}")
-    lum = np.asarray(cv.LUMA, np.float32)
-    gl, gh = photo_low @ lum, photo_high @ lum
-    detail = guide_detail(gl, gh) if method == "guided" else None  # once for every guided map
-    out = {}
-    for k, v in stored.items():
-        if method == "guided" and k in GUIDED_MAPS:
-            out[k] = guided_upsample(v, gl, gh, detail=detail)
-        else:
-            out[k] = resize(v, side).reshape(side, side, -1)
-    n = out["normal"]
-    n *= np.float32(2.0)
-    n -= np.float32(1.0)
-    np.maximum(n[..., 2], np.float32(1e-3), out=n[..., 2])  # stay in the upper hemisphere
-    # cv.normalize then cv.encode_normals, in place (the same sums, without numpy's slow reduction
-    # over a 3-long axis)
-    norm = n[..., 0] * n[..., 0]
-    norm += n[..., 1] * n[..., 1]
-    norm += n[..., 2] * n[..., 2]
-    norm += np.float32(1e-20)
-    np.sqrt(norm, out=norm)
-    n /= norm[..., None]
-    n *= np.float32(0.5)
-    n += np.float32(0.5)
-    for k, v in out.items():
-        np.clip(v, 0.0, 1.0, out=v)
-        out[k] = v if v.dtype == np.float32 else v.astype(np.float32)
-    return out
-
-
-def network_input(linear, gain_ev=None):
-    """A linear square crop -> what the networks take: :data:`NETWORK_SIZE`², exposed by ``gain_ev``
-    stops (None: :func:`auto_exposure_gain`), encoded."""
-    low = resize(linear, NETWORK_SIZE)
-    if gain_ev is None:
-        gain_ev = auto_exposure_gain(low)
-    return ingest.encode_for_network(low, 2.0 ** gain_ev)
-
-
-def confidence_maps(chain, net_in, stored, side):
-    """{map: (side, side) confidence} from :data:`svbrdf_cli.infer.tta.CONFIDENCE_PASSES` (``stored``: the plain pass)."""
-    from svbrdf_cli.infer import tta
-
-    conf = tta.confidence([stored] + tta.passes(chain, net_in, tta.CONFIDENCE_PASSES[1:]))
-    return {k: v if v.shape[0] == side else np.clip(_resize_to(v[..., None], (side, side))[..., 0], 0, 1)
-            for k, v in conf.items()}
-
-
 def output_size(opts, crop_side):
     if opts.size is not None:
         return int(opts.size)
     return int(min(DEFAULT_SIZE, max(MIN_SIZE, crop_side)))
-
-
-#: Lights of the preview's relit renders (surface units; the surface spans -1..1).
-PREVIEW_LIGHTS = {"flash": cv.FLASH_POSITION, "left": (-2.0, 0.5, 1.2), "top right": (1.5, 1.5, 1.5)}
-
-
-def preview_image(network_input, stored, tile=256):
-    """4 x 2 grid: photo, normal, diffuse, roughness / specular and three relit renders."""
-    import cv2
-
-    from svbrdf_cli.write.mapset import stored_to_linear
-    from svbrdf_cli.shading import render_maps
-
-    small = {k: resize(v, tile) for k, v in stored.items()}
-    lin = stored_to_linear(small)
-    tiles = [("photo", resize(network_input, tile)), ("normal", small["normal"]), ("diffuse", small["diffuse"]),
-             ("roughness", np.repeat(small["roughness"][..., :1], 3, -1)), ("specular", small["specular"])]
-    for name, light in PREVIEW_LIGHTS.items():
-        img = render_maps(lin, light=light)  # float32: the preview within 1/255 of float64, in 60% of its time
-        tiles.append((f"relit: {name}", cv.image_to_encoded(img).astype(np.float32)))
-    grid = np.zeros((2 * tile, 4 * tile, 3), np.float32)
-    for i, (name, img) in enumerate(tiles):
-        r, c = divmod(i, 4)
-        t = np.ascontiguousarray((img.clip(0, 1) * 255 + 0.5).astype(np.uint8))
-        t[-20:] = t[-20:] // 3  # a dark band under the label
-        cv2.putText(t, name, (5, tile - 6), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1, cv2.LINE_AA)
-        grid[r * tile:(r + 1) * tile, c * tile:(c + 1) * tile] = t / np.float32(255)
-    return grid
-
-
-def file_sha256(path):
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def output_folder(out_root, photo_path):
@@ -441,7 +256,7 @@ def _write_set(path, folder, opts, record, timings, stored, maps, net_in, out, c
     from svbrdf_cli.write.presets import write_preset
 
     t2 = time.perf_counter()
-    record["input"]["sha256"] = file_sha256(path)
+    record["input"]["sha256"] = ingest.file_sha256(path)
     # the preview is made and encoded on the same threads as the maps (write_preset's images)
     images = [("preview.png", functools.partial(preview_image, net_in, stored), 8, True)] if opts.preview else []
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from svbrdf_cli import conventions as cv
+from svbrdf_cli.imageops import luminance
 
 #: Width of the cross-fade band at each border, as a fraction of the map's size.
 BAND = 0.25
@@ -46,7 +47,7 @@ def make_tileable(maps, band=BAND):
     """Linear maps (HWC) -> the same maps, seamless when tiled (see the module docstring)."""
     h, w = next(iter(maps.values())).shape[:2]
     a = weights(h, w, band)[..., None]
-    lum = np.asarray(maps["diffuse"], np.float64) @ np.asarray(cv.LUMA) if "diffuse" in maps else np.zeros((h, w))
+    lum = luminance(np.asarray(maps["diffuse"], np.float64), np.float64) if "diffuse" in maps else np.zeros((h, w))
     cy, cx = _cut(lum, 0), _cut(lum, 1)  # the copy starts at (cy, cx): its edges are a smooth cut
     out = {}
     for k, v in maps.items():

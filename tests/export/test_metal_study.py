@@ -10,7 +10,7 @@ from svbrdf_cli.infer import physical as ph
 def _photo(diffuse, f0, roughness=0.3, size=128):
     """An encoded photo of a flat surface under the conventions' flash: a diffuse level and a lobe."""
     geo = ph.Geometry()
-    x, y = ph._grid(size, size)
+    x, y = ph.surface_grid(size, size)
     rho = np.sqrt(x * x + y * y)
     shading, d = ph.shading_at(rho, geo.height, geo.height)
     lum = geo.intensity * (diffuse * shading + f0 * ph.lobe(d, geo.height, roughness))
@@ -37,7 +37,7 @@ def test_a_lobe_without_diffuse_reads_as_a_metal_and_a_matte_plane_does_not():
 def _coloured(diffuse_rgb, f0_rgb, roughness=0.15, size=128):
     """An encoded photo like :func:`_photo` with per-channel diffuse and F0 (a white flash)."""
     geo = ph.Geometry()
-    x, y = ph._grid(size, size)
+    x, y = ph.surface_grid(size, size)
     rho = np.sqrt(x * x + y * y)
     shading, d = ph.shading_at(rho, geo.height, geo.height)
     lobe = ph.lobe(d, geo.height, roughness)

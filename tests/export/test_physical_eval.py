@@ -29,7 +29,7 @@ def test_physical_beats_the_floor_on_des19_and_the_card(shared_data):
 def test_physical_keeps_the_colour_of_the_real_photos(shared_data):
     from export.studies import stability
 
-    from svbrdf_cli.run.pipeline import network_input
+    from svbrdf_cli.infer.exposure import network_input
 
     real = stability.real_crops(shared_data / "real", stability.REAL_PHOTOS)
     inputs = [(name, network_input(lin)) for name, lin in real]
