@@ -4,7 +4,7 @@
     python -m export.studies.metal_study --model-dir EXPORT   # and a trained network's F0 on the same photos
 
 The physical estimate (:mod:`svbrdf_cli.infer.physical`) gives every photo the dielectric F0 = 0.04
-(``DETECT_METALS = False``). This study asks whether a calibrated decision over the fit's physical
+(from the photo alone). This study asks whether a calibrated decision over the fit's physical
 evidence would do better. Per photo it measures the evidence the flash fit yields (:func:`features`):
 the photo's dynamic range and brightness percentiles, its clipped share and colour, and three fits of
 the ring profile round the flash foot (the estimate's bounded dielectric fit, an unbounded diffuse +
@@ -94,7 +94,7 @@ def features(image, geo=None):
     foot = ph.flash_foot(lum, x, y)
     rho = np.sqrt((x - foot[0]) ** 2 + (y - foot[1]) ** 2)
     clipped = (im >= ph.CLIPPED).any(-1)
-    fd = ph.fit_lobe(lum, clipped, rho, geo, metals=False)
+    fd = ph.fit_lobe(lum, clipped, rho, geo)
     p = geo.intensity
     r, prof, wts = ph.ring_profile(lum, clipped, rho)
     unb = {"m0": 0.0, "m1": 0.0, "res_u": 1.0, "res_l": 1.0, "r_l": ph.DEFAULT_ROUGHNESS}

@@ -2,8 +2,6 @@
 except for the one documented convention fit.
 
     python -m export.studies.physical_eval --fit-flash      # the Des19 inputs' flash power (conventions.FLASH_INTENSITY)
-    python -m export.studies.physical_eval --normals        # NORMAL_STRENGTH on generated photos
-    python -m export.studies.physical_eval --highlight-figure F.png --photo A.jpg ...   # v5's colour separation
 
 ``--fit-flash`` fits, per Des19 sample, the point-light intensity at the conventions' flash position
 that reproduces the input from its maps read as linear albedo, on the pixels where the diffuse term
@@ -12,9 +10,8 @@ barely does). It is a fit of the data's convention (one scalar: the flash power 
 were rendered with), the same kind of fit as the renderer's geometry, not a fit of any method to
 the ground truth.
 
-``--normals`` draws photos from the training simulator (:mod:`export.data.dataset`, a fixed seed)
-and reports the normal RMSE of the physical estimate for a range of strengths; the shipped
-:data:`svbrdf_cli.infer.physical.NORMAL_STRENGTH` is the best of them (a conservative single number).
+:func:`generated_photos` draws photos from the training simulator (:mod:`export.data.dataset`, a
+fixed seed) for the studies that score the estimate on them.
 """
 
 from __future__ import annotations
@@ -74,65 +71,14 @@ def generated_photos(count=64, size=256, seed=2468):
     return np.concatenate(photos), {k: np.concatenate(v) for k, v in maps.items()}
 
 
-def normal_sweep(strengths, count=64, log=print):
-    """{strength: normal RMSE (stored encoding)} of the physical estimate on generated photos."""
-    photos, maps = generated_photos(count)
-    gt = cv.encode_normals(maps["normal"])
-    res = {}
-    for s in strengths:
-        errs = [float(np.sqrt(((physical.estimate(p, normal_strength=s)[0]["normal"] - gt[i]) ** 2).mean()))
-                for i, p in enumerate(photos)]
-        res[s] = float(np.mean(errs))
-        log(f"strength {s:.4f}: normal RMSE {res[s]:.4f}")
-    best = min(res.values())
-    pick = max(s for s, e in res.items() if e <= 1.01 * best)
-    log(f"the strongest within 1% of the best: {pick} (physical.NORMAL_STRENGTH = {physical.NORMAL_STRENGTH})")
-    return res, pick
-
-
-def highlight_figure(photos, path, size=512, tile=256):
-    """For each photo (cropped and exposed as ``svbrdf capture`` does it, at ``size``): the photo, the
-    estimate's diffuse with the highlight taken off as the lobe's share alone, and with the colour
-    separation (:func:`svbrdf_cli.infer.physical.separate_by_colour`, the shipped default)."""
-    from export.render.figure import captioned_tile
-    from svbrdf_cli.ingest import photo as ingest
-    from svbrdf_cli.imageio import write_image
-    from svbrdf_cli.run.pipeline import Options, prepare
-    from svbrdf_cli.imageops import resize
-
-    rows = []
-    for photo in photos:
-        p = prepare(photo, Options())
-        image = ingest.encode_for_network(resize(p.crop.image, size) * np.float32(2.0 ** p.gain_ev))
-        cells = [(os.path.basename(photo), image)]
-        for flag, title in ((False, "diffuse, lobe share only"), (True, "diffuse, by colour (v5)")):
-            old, physical.COLOUR_SEPARATION = physical.COLOUR_SEPARATION, flag
-            try:
-                cells.append((title, physical.estimate(image)[0]["diffuse"]))
-            finally:
-                physical.COLOUR_SEPARATION = old
-        rows.append(np.concatenate([captioned_tile(img, t, tile) for t, img in cells], 1))
-    write_image(path, np.concatenate(rows, 0).astype(np.float32) / 255)
-
-
 @click.command()
 @click.option("--fit-flash", "flash", is_flag=True, help="Fit the Des19 inputs' flash power (a convention).")
-@click.option("--normals", is_flag=True, help="Normal RMSE against strength on generated photos.")
-@click.option("--count", default=64, show_default=True)
-@click.option("--highlight-figure", "figure", type=click.Path(dir_okay=False), default=None,
-              help="Draw the diffuse with and without the colour separation for the --photo files into this PNG.")
-@click.option("--photo", "photos", multiple=True, type=click.Path(exists=True, dir_okay=False))
-def cli(flash, normals, count, figure, photos):
+def cli(flash):
     """Calibrate and check the physical estimate."""
-    from export.files import command_errors, shared_root
+    from export.files import shared_root
 
     if flash:
         fit_flash(str(shared_root() / "data" / "validation" / "des19"), log=click.echo)
-    if normals:
-        normal_sweep([0.0, 0.05, 0.1, 0.2, 0.3, 0.5, 0.8], count=count, log=click.echo)
-    if figure:
-        with command_errors():
-            highlight_figure(photos, figure)
 
 
 if __name__ == "__main__":

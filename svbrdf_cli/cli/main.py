@@ -4,7 +4,7 @@ import logging
 
 import click
 
-from svbrdf_cli import __version__
+from svbrdf_cli.version import __version__
 from svbrdf_cli.cli.options import quiet_opt, set_verbosity, verbose_opt
 from svbrdf_cli.errors import SvbrdfError
 

@@ -20,14 +20,12 @@ What a flash photo of a flat surface tells us for free, computed rather than lea
   is taken off as white. Pixels the highlight clipped or dominates are filled in from their
   surroundings, and any trend with the distance to the foot is divided out (for the greys on
   their own first).
-* **specular**: dielectrics (the great majority of real surfaces) get F0 =
-  :data:`svbrdf_cli.conventions.DIELECTRIC_F0`. A metal hypothesis (a highlight far too strong
-  for a dielectric over a dark diffuse) exists but is off by default (:data:`DETECT_METALS`:
-  measured, it misreads dark dielectrics more often than it finds metals).
-* **normals**: with the light at the lens, a tilt changes the shading only in proportion to the
-  light's lateral component, and albedo texture changes it the same way. :func:`normal_map` reads
-  first-order flash shading as tilt, but measured, any strength raised the error, so the shipped
-  strength is 0 (:data:`NORMAL_STRENGTH`): flat normals, relief left to the refining networks.
+* **specular**: F0 = :data:`svbrdf_cli.conventions.DIELECTRIC_F0` (a dielectric's, the great
+  majority of real surfaces): from the photo alone a metal cannot be told from a dark glossy
+  dielectric (``docs/benchmarks.md``).
+* **normals**: flat. With the light at the lens, a tilt changes the shading only in proportion to
+  the light's lateral component, and albedo texture changes it the same way: read as tilt, shading
+  raised the normal error (``docs/benchmarks.md``); relief is left to ``--refine``.
 
 **The absolute albedo level** cannot be recovered from one exposed photo (a darker surface
 under a stronger flash looks the same). The estimate takes the photo, as the tool exposes
@@ -67,28 +65,9 @@ PROFILE_RINGS = 64
 #: Flash heights tried, as multiples of the assumed one (the falloff's steepness; the
 #: irradiance at the foot stays the convention's, so the albedo level does not move).
 HEIGHT_GRID = np.array([0.75, 0.87, 1.0, 1.15, 1.35])
-#: Whether the estimate tries the metal hypothesis at all. Off: from the photo alone it tells
-#: metals from dark dielectrics badly. On 128 generated photos (11 metals) it found 2 metals
-#: and called 3 dielectrics metal, and specular RMSE rose from 0.0679 (F0 = 0.04 everywhere)
-#: to 0.0729; no threshold on the lobe-to-diffuse ratio or the photo's dynamic range
-#: separated the two on two independent generated sets. Metals are left to the networks. A logistic
-#: regression over 13 measures of the fit's evidence (``python -m export.studies.metal_study``, session 12)
-#: found 8 of Des19's 11 metals with no false call, but called 14 of 267 real photos metal, every one
-#: I looked at a dark glossy dielectric (black plastic, leather, stained wood, granite). Issue 14's own
-#: cue, a highlight as coloured as the rest of the photo (same study, session 13), called 4 of Des19's
-#: 11 metals and no dielectric, but left its F0 error where it was (0.0505), called 7 of 10
-#: dielectrics on generated photos, and on real photos a neutral material under a colour cast
-#: (gingham, black plastic) looks just like a tinted metal.
-DETECT_METALS = False
 #: A dielectric's lobe height over its diffuse level at most: F0 = 0.04 over an albedo
 #: of at least 0.02 (the darkest common dielectrics, black leather or rubber).
 MAX_LOBE_RATIO = 2.0
-#: Metal: F0 (at the convention's flash power) above this, 2.5x any common dielectric's;
-#: mean diffuse under this fraction of F0; and a fit residual at most (1 - gain) x the
-#: dielectric hypothesis's.
-METAL_MIN_F0 = 0.1
-METAL_MAX_DIFFUSE = 0.3
-METAL_MIN_GAIN = 0.3
 #: Pixels where the fitted highlight makes more than this share of the photo's
 #: brightness, or that are clipped, take their diffuse from the surroundings (what is
 #: left of them after the highlight is taken off is dark and grey: a hole in the diffuse).
@@ -108,9 +87,8 @@ SUBTRACT_FLOOR = 0.25
 RADIAL_DEGREE = 4
 #: Encoded values at or above this (times the photo's clip level) are clipped.
 CLIPPED = cv.CLIPPED
-#: Fill the highlight left in the diffuse at the highlight's own peak (:func:`highlight_residue`): a
-#: patch of the diffuse this much brighter than the diffuse round the photo's highlight blob.
-RESIDUE_FILL = True
+#: The highlight left in the diffuse at the highlight's own peak (:func:`highlight_residue`) is filled:
+#: a patch of the diffuse this much brighter than the diffuse round the photo's highlight blob.
 RESIDUE_LEVEL = 0.2
 #: ... and this much whiter than the diffuse's median (weakest over strongest channel). Without this
 #: rule the brightest patch of a matte textured surface was taken too (a brick on 4 of Des19's brick
@@ -118,9 +96,6 @@ RESIDUE_LEVEL = 0.2
 #: and the 12 real benchmark photos whitened by -0.11 to 0.19, a speckled worktop's clear-coat glint
 #: by 0.44 (henzler_train IMG_0785). A grey material has no colour to whiten and is never filled.
 RESIDUE_WHITENING = 0.25
-#: Separate the highlight from the diffuse by colour where the material has one
-#: (:func:`separate_by_colour`): the dichromatic reflection model.
-COLOUR_SEPARATION = True
 #: Hue bins of the colour separation's hue-aware spreading, and the least (trust-weighted) share of
 #: the image a hue must cover to be read at all.
 HUE_BINS = 12
@@ -141,19 +116,6 @@ WHITE_FULL, WHITE_NONE = 0.4, 0.7
 #: Encoded values at or above this have lost their colour to the sensor's range (the weakest
 #: channel of a near-clipped pixel is all highlight).
 NEAR_CLIPPED = 0.95
-#: Normals from shading (:func:`normal_map`): the high-pass scale (fraction of the image
-#: width), the regularisation of the tilt under the flash (squared lateral light
-#: component), and the strength: the strongest whose normal RMSE on 64 generated photos
-#: is within 1 % of the best (``python -m export.studies.physical_eval --normals``). Measured, every
-#: strength above 0 raises the error (0.05: +1.1 % on generated photos, Des19 0.0633
-#: against the flat 0.0590, card_blue relight 0.154 against 0.151): albedo texture reads as
-#: tilt as much as relief does. So the estimate's normals are flat, and relief is left to
-#: the networks that refine it.
-HEIGHT_SCALE = 0.03
-TILT_EPS = 0.01
-NORMAL_STRENGTH = 0.0
-
-
 @dataclasses.dataclass
 class Geometry:
     """Where the flash and camera are (surface units; the surface spans [-1, 1]^2)."""
@@ -218,7 +180,6 @@ class Lobe:
     diffuse: float       # flash power x mean diffuse luminance (the profile's floor)
     specular: float      # flash power x F0
     height: float        # the flash height whose falloff fits best
-    metal: bool
     gain: float          # fraction of the flat-profile residual the fit explains
 
 
@@ -258,23 +219,20 @@ def lobe_terms(rho, prof, wts, geo):
                                  m0=(sgg * sy - ssg * gy) / det, m1=(sss * gy - ssg * sy) / det)
 
 
-def fit_lobe(lum, clipped, rho, geo, metals=False):
+def fit_lobe(lum, clipped, rho, geo):
     """Fit the ring-averaged brightness around the foot with a flat surface's diffuse falloff plus its
     flash highlight, over :data:`HEIGHT_GRID` x :data:`ROUGHNESS_GRID`.
 
-    Two hypotheses: a **dielectric**, whose lobe is at most :data:`MAX_LOBE_RATIO` times its
-    diffuse (F0 = 0.04 over an albedo of at least 0.02: without that bound a broad lobe and a
-    flatter falloff explain the same profile, and the fit hands the whole photo to the lobe), and
-    a **metal** (no bound). The metal wins only when its F0 is far above any dielectric's
-    (:data:`METAL_MIN_F0`) over a diffuse under :data:`METAL_MAX_DIFFUSE` of it, and it fits
-    clearly better (:data:`METAL_MIN_GAIN`). The photo's exposure is not assumed: the lobe's
+    The surface is a dielectric, whose lobe is at most :data:`MAX_LOBE_RATIO` times its diffuse
+    (F0 = 0.04 over an albedo of at least 0.02: without that bound a broad lobe and a flatter
+    falloff explain the same profile, and the fit hands the whole photo to the lobe). The photo's exposure is not assumed: the lobe's
     height is fitted, only the diffuse level is read at the convention's flash power.
     """
     P = geo.intensity
     rho, prof, wts = ring_profile(lum, clipped, rho)
     if len(rho) < 6:
         return Lobe(DEFAULT_ROUGHNESS, float(np.median(lum / (geo.height ** -2))), cv.DIELECTRIC_F0 * P,
-                    geo.height, False, 0.0)
+                    geo.height, 0.0)
     base = float((wts * prof).sum() / wts.sum())
     res_flat = float((wts * (prof - base) ** 2).sum())
     t = lobe_terms(rho, prof, wts, geo)
@@ -290,18 +248,8 @@ def fit_lobe(lum, clipped, rho, geo, metals=False):
     c1 = np.where(inside, m1, np.where(m1 > k * m0, k * edge, 0.0))
     res_d = (w * (prof - c0[..., None] * s - c1[..., None] * g) ** 2).sum(-1)
     i = np.unravel_index(int(np.argmin(res_d)), res_d.shape)
-    best_d = (float(res_d[i]), float(ROUGHNESS_GRID[i[1]]), float(heights[i[0]]), float(c0[i]), float(c1[i]))
-    best_m = None
-    if metals:  # metal: c0, c1 >= 0, no bound on the lobe
-        res_m = (w * (prof - m0[..., None] * s - m1[..., None] * g) ** 2).sum(-1)
-        res_m = np.where((m0 >= 0) & (m1 > 0), res_m, np.inf)
-        j = np.unravel_index(int(np.argmin(res_m)), res_m.shape)
-        if np.isfinite(res_m[j]):
-            best_m = (float(res_m[j]), float(ROUGHNESS_GRID[j[1]]), float(heights[j[0]]), float(m0[j]), float(m1[j]))
-    metal = (best_m is not None and best_m[4] / P > METAL_MIN_F0 and best_m[3] / P < METAL_MAX_DIFFUSE * best_m[4] / P
-             and best_m[0] < (1.0 - METAL_MIN_GAIN) * best_d[0])
-    res, r, h, c0, c1 = best_m if metal else best_d
-    return Lobe(float(r), c0, c1, float(h), bool(metal), 1.0 - res / max(res_flat, 1e-20))
+    res, r, h = float(res_d[i]), float(ROUGHNESS_GRID[i[1]]), float(heights[i[0]])
+    return Lobe(r, float(c0[i]), float(c1[i]), h, 1.0 - res / max(res_flat, 1e-20))
 
 
 def flatten_radial(diffuse, rho, rings=PROFILE_RINGS // 2, weights=None):
@@ -492,60 +440,18 @@ def _residue_spot(img, diffuse):
     return cv2.resize(spot.astype(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST).astype(bool)
 
 
-def specular_map(fit, lin, clipped, dominated, intensity):
-    """F0 (RGB) from the fitted lobe: the dielectric's, or a metal's tinted by its highlight's colour
-    (the photo's where the lobe dominates and nothing clipped; white balance is the flash's)."""
-    if fit.metal:
-        dom = dominated & ~clipped
-        highlight_rgb = lin[dom].mean(0) if dom.sum() >= 8 else np.ones(3, np.float32)
-        tint = highlight_rgb / max(float(highlight_rgb.max()), 1e-6)
-        return np.clip(fit.specular / intensity * tint / max(float(luminance(tint[None])[0]), 1e-6),
-                       cv.DIELECTRIC_F0, 1.0).astype(np.float32)
-    return np.full(3, cv.DIELECTRIC_F0, np.float32)
-
-
-def normal_map(lum_albedo, light_xy, light_z, strength=None, scale=HEIGHT_SCALE):
-    """Normals from first-order flash shading, scaled by ``strength``.
-
-    With the light in direction ``l``, a small tilt ``t = (tx, ty)`` of the normal changes the
-    shading by ``(tx lx + ty ly) / lz`` relative to a flat surface. The relative brightness of each
-    pixel against its neighbourhood (a high-pass of the diffuse estimate's brightness, which the flash
-    falloff and the highlight have left) is read as that change, and the smallest tilt that explains
-    it is ``r lz l_xy / |l_xy|^2`` (regularised by :data:`TILT_EPS` under the flash, where the light
-    is straight above and the shading says nothing about tilt). Albedo texture reads as tilt too,
-    which is why ``strength`` is conservative.
-
-    Args:
-        lum_albedo: (H, W) diffuse brightness.
-        light_xy: (H, W, 2) lateral components of the unit direction to the flash (x right, y up).
-        light_z: (H, W) its vertical component.
-    """
-    strength = NORMAL_STRENGTH if strength is None else strength
-    h, w = lum_albedo.shape
-    if strength == 0:  # (the default) flat: nothing to read from the shading
-        return np.concatenate([np.zeros((h, w, 2), np.float32), np.ones((h, w, 1), np.float32)], -1)
-    lum = np.maximum(lum_albedo, 1e-4).astype(np.float32)
-    r = lum / blur(lum, max(1.0, scale * 8 * w)) - 1.0
-    r = blur(r, max(0.5, w / 512.0))
-    k = (strength * r * light_z / ((light_xy ** 2).sum(-1) + TILT_EPS))[..., None]
-    n = np.concatenate([k * light_xy, np.ones((h, w, 1), np.float32)], -1)
-    return cv.normalize(n).astype(np.float32)
-
-
-def estimate(image, geo=None, normal_strength=None, with_fit=False, metals=None):
+def estimate(image, geo=None, with_fit=False):
     """The physical estimate of one photo.
 
     Args:
         image: (H, W, 3) encoded photo in [0, 1] (as the networks take it).
         geo: :class:`Geometry` (default: the conventions' flash, foot found from the photo).
-        normal_strength: tilt from shading (default :data:`NORMAL_STRENGTH`; see :func:`normal_map`).
-        metals: try the metal hypothesis (default :data:`DETECT_METALS`, off; see there).
         with_fit: also return the encoded image of a flat surface of uniform albedo under the
             fitted flash (what the fit explains of the photo; ``--debug`` writes it).
 
     Returns:
         (dict of stored-encoding maps (HWC, roughness one channel), dict of what was found:
-        foot, flash height, roughness, F0, metal, fit gain[, the fitted image]).
+        foot, flash height, roughness, F0, fit gain[, the fitted image]).
     """
     geo = geo or Geometry()
     img = np.asarray(image, np.float32)
@@ -561,30 +467,30 @@ def estimate(image, geo=None, normal_strength=None, with_fit=False, metals=None)
     # stays in it as a lower bound. Measured, leaving it out too broadens the fitted lobe on real
     # data: Des19 as svbrdf capture exposes it, roughness 0.2038 against 0.1905; +2 EV clipped 0.2655
     # against 0.2119; card_blue relight 0.151 against 0.146 (on a constructed photo it would help).
-    fit = fit_lobe(lum, (img >= CLIPPED).any(-1), rho, geo, metals=DETECT_METALS if metals is None else metals)
+    fit = fit_lobe(lum, (img >= CLIPPED).any(-1), rho, geo)
     shading, d = shading_at(rho, fit.height, geo.height)
     spec = lobe(d, fit.height, fit.roughness).astype(np.float32) * (fit.height / geo.height) ** 2
     spec_rad = fit.specular * spec  # luminance of the lobe
-    f0 = specular_map(fit, lin, clipped, spec_rad > 2.0 * fit.diffuse * shading, geo.intensity)
+    f0 = np.full(3, cv.DIELECTRIC_F0, np.float32)
     # Diffuse: the photo less the fitted highlight's share of each pixel, over the flash shading. The
     # share (lobe over the fitted flat-surface profile), not the lobe's absolute radiance, is taken
     # off: where the highlight is brighter or sharper than fitted, the photo's texture is kept at the
     # diffuse level instead of a hole or a residual disc.
     model = fit.diffuse * shading + spec_rad
     # (the BRDF's diffuse term is d (1 - F0) / pi: the energy the specular reflects is not diffused)
-    keep = np.maximum(1.0 - f0, 0.05)  # a metal's F0 reaches 1: its diffuse is near 0 anyway
-    # The highlight is the flash's colour (white, F0's tint for a metal): the fitted lobe's share of
+    keep = np.maximum(1.0 - f0, 0.05)
+    # The highlight is the flash's colour (white): the fitted lobe's share of
     # each pixel's brightness is taken off every channel (at most 1 - SUBTRACT_FLOOR of the weakest,
     # so the hue stays the photo's) rather than the pixel being scaled, which would leave the
     # highlight's whiteness in the diffuse (a pale disc, and greyer colours).
     share = (spec_rad / np.maximum(model, 1e-6))[..., None]
-    tint = f0 / max(float(luminance(f0[None])[0]), 1e-6)  # the highlight's colour (white but for a metal)
+    tint = f0 / max(float(luminance(f0[None])[0]), 1e-6)  # the highlight's colour: white
     white = np.minimum(share * lum[..., None], (1.0 - SUBTRACT_FLOOR) * (lin / tint).min(-1, keepdims=True))
     base = lin - white * tint
     bad = clipped | (share[..., 0] > HIGHLIGHT_SHARE)  # what is left there is mostly the highlight's
     flat_fill = clipped  # filled without the photo's texture: what is left there is the highlight's
     grey = None
-    if COLOUR_SEPARATION and not fit.metal and fit.specular > 0:
+    if fit.specular > 0:
         # where the diffuse has a colour, the highlight is read per pixel from it (glossy tiles lose
         # theirs, the matte grout keeps its own); the lobe's smooth share elsewhere
         near = _channel_min_max(img)[1] >= NEAR_CLIPPED * level
@@ -605,17 +511,14 @@ def estimate(image, geo=None, normal_strength=None, with_fit=False, metals=None)
         # lobe is smooth at that scale), none where it clipped
         rel = np.where(flat_fill, 1.0, _relative_texture(lum)).astype(np.float32)
     diffuse = fill_from_surroundings(np.clip(diffuse, 0.0, None).astype(np.float32), bad, rel)
-    if RESIDUE_FILL:  # what the lobe did not take off at the highlight's own peak (a sharper highlight)
-        spot = _residue_spot(img, diffuse)
-        if spot.any():
-            diffuse = fill_from_surroundings(diffuse, spot, _texture_beside(diffuse, spot))
+    spot = _residue_spot(img, diffuse)  # what the lobe did not take off at the highlight's peak (a sharper one)
+    if spot.any():
+        diffuse = fill_from_surroundings(diffuse, spot, _texture_beside(diffuse, spot))
     if grey is not None and 0.02 < float(grey.mean()) < 0.98:  # the greys' own trend first (their highlight was
         diffuse = flatten_radial(diffuse, rho, weights=grey)  # taken off by the lobe's share, the rest's by colour)
     diffuse = flatten_radial(diffuse, rho)
     diffuse = np.clip(np.nan_to_num(diffuse, nan=0.0, posinf=1.0), 0.0, 1.0).astype(np.float32)
-    light_xy = np.stack([foot[0] - x, foot[1] - y], -1) / d[..., None]
-    normal = normal_map(luminance(diffuse), light_xy.astype(np.float32), (fit.height / d).astype(np.float32),
-                        strength=normal_strength)
+    normal = np.concatenate([np.zeros((h, w, 2), np.float32), np.ones((h, w, 1), np.float32)], -1)  # flat
     stored = {"normal": cv.encode_normals(normal).astype(np.float32),
               "diffuse": cv.albedo_to_stored(diffuse).astype(np.float32),
               "roughness": np.full((h, w, 1), fit.roughness, np.float32),
@@ -623,7 +526,7 @@ def estimate(image, geo=None, normal_strength=None, with_fit=False, metals=None)
     # what the fit saw, for --debug: the flat surface of uniform albedo under the fitted flash
     fitted = cv.image_to_encoded(np.repeat(model[..., None], 3, -1)).astype(np.float32)
     found = {"flash_foot": [round(foot[0], 4), round(foot[1], 4)], "flash_height": round(fit.height, 4),
-             "roughness": round(fit.roughness, 4), "f0": [round(float(v), 4) for v in f0], "metal": fit.metal,
+             "roughness": round(fit.roughness, 4), "f0": [round(float(v), 4) for v in f0],
              "fit_gain": round(float(fit.gain), 4), "flash_intensity": geo.intensity}
     return (stored, found, fitted) if with_fit else (stored, found)
 

@@ -26,7 +26,7 @@ diffuse alone could copy the photo exactly, so the priors decide how the residua
   may shape it from pixel to pixel but not lower the whole map;
 * **normals near the up direction** unless the photo needs them tilted;
 * **no trend with the distance to the highlight** in the diffuse's, roughness's and F0's changes
-  (:data:`NO_RADIAL_TREND`): no disc round the flash, no vignetting taken up by the diffuse.
+  (:func:`_without_radial_trend`): no disc round the flash, no vignetting taken up by the diffuse.
 
 **Schedule.** Coarse to fine (:data:`LEVELS`): the changes are first found on a small image,
 where the smooth parts converge in few cheap steps, then upsampled and refined at the next
@@ -61,11 +61,6 @@ CLIPPED = cv.CLIPPED
 #: Pixels this close (a fraction of the width) to a clipped one are left out of the photo term
 #: (the edge of a clipped blob is partly clipped too).
 CLIP_MARGIN = 0.008
-#: Coarse levels take the full size's photo weight, averaged, rather than their own clipped mask.
-SOFT_LEVELS = True
-#: The photo term's weight rises from 0 to 1 between :data:`CLIP_MARGIN` and twice that from a clipped
-#: pixel (off: a hard edge at the margin, dilated with a square).
-CLIP_RAMP = True
 #: Width of the robust (Cauchy) loss on encoded residuals: residuals well under it count as
 #: squares, residuals well over it (a sparkle the model cannot make, a speck of dust) barely pull.
 ROBUST_WIDTH = 0.2
@@ -132,9 +127,8 @@ SPECULAR_FLOOR = cv.DIELECTRIC_F0
 #: flash happened to point; a fit that makes it so is explaining the highlight's shape (sharper than
 #: the start's lobe, its clipped core left out) or the lens's vignetting and the flash's beam, and
 #: leaves a disc round the flash, or dark edges that show as a grid when the texture tiles.
-NO_RADIAL_TREND = True
 RADIAL_RINGS = 16
-#: The maps whose change loses its radial trend (:data:`NO_RADIAL_TREND`). The diffuse since session 13:
+#: The maps whose change loses its radial trend. The diffuse since session 13:
 #: on the 12 real benchmark photos (``svbrdf capture --size 512``) the fit had made the diffuse's edges
 #: darker than its centre by a median 10 % (log-brightness of the outer rings against the inner ones;
 #: the estimate's own: 4 %), now 4 %; the spread of its ring means fell from 0.052 to 0.044 (estimate
@@ -146,9 +140,8 @@ TILT_LIMIT = 3.0  # 72 degrees
 #: from the surrounding pixels' change once the fit is done, instead of the start's values the
 #: priors hold there: the change is the photo's evidence about the material (a glossier tile, a
 #: brighter diffuse), and the clipped disc is the same material. Without it the bundled sample's
-#: F0 showed a dark disc at the clipped highlight inside a ring that had moved.
-FILL_UNOBSERVED = True
-#: The parameters :data:`FILL_UNOBSERVED` fills. The tilt since session 13: held at the start's inside the
+#: F0 showed a dark disc at the clipped highlight inside a ring that had moved (:func:`_fill_unobserved`).
+#: The parameters :func:`_fill_unobserved` fills. The tilt since session 13: held at the start's inside the
 #: clipped region while the fit tilted the normals round it, it drew the region's ragged outline into
 #: every relit render of the highlight (the red lacquer and a varnished wood of the real benchmark
 #: photos; blurring the normal map alone took the outline away). Card 0.1221 either way, 32 generated
@@ -182,7 +175,7 @@ def _encode(r):
 
 def _unclipped(photo_lin):
     """(H, W, 1) weight: 0 at clipped pixels and within :data:`CLIP_MARGIN` of one, rising to 1 over as
-    much again (:data:`CLIP_RAMP`; Euclidean distance: a round rim, not a square kernel's staircase)."""
+    much again (Euclidean distance: a round rim, not a square kernel's staircase)."""
     import cv2
 
     level = cv.clip_level(cv.image_to_encoded(photo_lin))  # (a clipped highlight the exposure darkened)
@@ -190,10 +183,6 @@ def _unclipped(photo_lin):
     r = max(1.0, CLIP_MARGIN * photo_lin.shape[0])
     if not clipped.any():
         return np.ones(photo_lin.shape[:2] + (1,), np.float32)
-    if not CLIP_RAMP:
-        k = int(round(r))
-        mask = cv2.dilate(clipped.astype(np.uint8), np.ones((2 * k + 1, 2 * k + 1), np.uint8))
-        return (1.0 - mask)[..., None].astype(np.float32)
     dist = cv2.distanceTransform((~clipped).astype(np.uint8), cv2.DIST_L2, 5)
     return np.clip((dist - r) / r, 0.0, 1.0)[..., None].astype(np.float32)
 
@@ -357,18 +346,17 @@ def fit_intensity(photo_lin, params, geometry, weight=None):
     return num / den if den > 0 else cv.FLASH_INTENSITY
 
 
-def _fill_unobserved(start, p, unobserved, radial=None):
+def _fill_unobserved(start, p, unobserved, radial):
     """``p`` with its change from ``start`` (:data:`FILLED`: tilt, diffuse, roughness, F0) at the ``unobserved`` pixels (the
     photo clipped them) taken from their surroundings' change (:func:`svbrdf_cli.imageops.fill_from_surroundings`),
     those of :data:`RADIAL_FREE` then freed of any radial trend again (``radial``: :func:`_radial`). The photo
-    term is per pixel, so the fill leaves it as it is; see :data:`FILL_UNOBSERVED`."""
-
+    term is per pixel, so the fill leaves it as it is; see :data:`FILLED`."""
     if not unobserved.any() or unobserved.all():
         return p
     out = dict(p)
     for k in FILLED:
         change = imageops.fill_from_surroundings(p[k] - start[k], unobserved)
-        if radial is not None and k in RADIAL_FREE:
+        if k in RADIAL_FREE:
             change = _without_radial_trend(change, radial)
         out[k] = (start[k] + change).astype(np.float32)
     _project(out)
@@ -408,11 +396,11 @@ def refine(image, stored, geometry, iterations=DEFAULT_ITERATIONS, priors=None, 
         # a coarser level's weight is the full size's averaged (INTER_AREA): fractional at the clipped region's
         # edge, not a mask of its own whose staircase of coarse pixels the finer levels inherit
         prob = full if s == side else _Problem(_at(photo, s), init, geometry, intensity, priors, side,
-                                               weight=_at(full.weight, s) if SOFT_LEVELS else None)
+                                               weight=_at(full.weight, s))
         delta = {k: np.zeros_like(v) for k, v in init.items()} if delta is None else \
             {k: _at(v, s) for k, v in delta.items()}
         tint = _tint(init["diffuse"])
-        radial = _radial(s, geometry.highlight[:2]) if NO_RADIAL_TREND else None
+        radial = _radial(s, geometry.highlight[:2])
         m1 = {k: np.zeros_like(v) for k, v in delta.items()}
         m2 = {k: np.zeros_like(v) for k, v in delta.items()}
         for i in range(1, steps + 1):
@@ -429,9 +417,8 @@ def refine(image, stored, geometry, iterations=DEFAULT_ITERATIONS, priors=None, 
                 step = STEP[k] * (m1[k] / (1 - 0.9 ** i)) / (np.sqrt(m2[k] / (1 - 0.999 ** i)) + 1e-12)
                 delta[k] = (delta[k] - step).astype(np.float32)
             delta["specular"] = _spec_change(delta["specular"], tint)
-            if radial is not None:
-                for k in RADIAL_FREE:
-                    delta[k] = _without_radial_trend(delta[k], radial)
+            for k in RADIAL_FREE:
+                delta[k] = _without_radial_trend(delta[k], radial)
             done += 1
             if progress:
                 progress(done)
@@ -445,8 +432,7 @@ def refine(image, stored, geometry, iterations=DEFAULT_ITERATIONS, priors=None, 
         total, data, _ = full(p)
         if np.isfinite(total) and (best_total is None or total < best_total):
             best, best_data = p, data
-    if FILL_UNOBSERVED:
-        best = _fill_unobserved(start, best, full.weight[..., 0] <= 0, radial)  # (the last level's: full size)
+    best = _fill_unobserved(start, best, full.weight[..., 0] <= 0, radial)  # (the last level's: full size)
     out = _stored(best)
     ok = all(np.isfinite(v).all() for v in out.values()) and best_data <= loss_before
     if not ok:

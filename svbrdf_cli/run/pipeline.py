@@ -32,7 +32,7 @@ import time
 
 import numpy as np
 
-from svbrdf_cli import __version__
+from svbrdf_cli.version import __version__
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.ingest import photo as ingest
 from svbrdf_cli.rectify import crops as rectify

@@ -61,7 +61,7 @@ import re
 
 import numpy as np
 
-from svbrdf_cli import __version__
+from svbrdf_cli.version import __version__
 from svbrdf_cli import conventions as cv
 from svbrdf_cli import imageio
 from svbrdf_cli.write.atomic import write_set
