@@ -37,8 +37,10 @@ def _imports(path, name, modules):
             if node.level:
                 parts = package.split(".")[: len(package.split(".")) - node.level + 1]
                 base = ".".join(parts + ([base] if base else []))
-            out.add(base)
-            out.update(f"{base}.{a.name}" for a in node.names if f"{base}.{a.name}" in modules)
+            subs = {f"{base}.{a.name}" for a in node.names if f"{base}.{a.name}" in modules}
+            out.update(subs)
+            if len(subs) < len(node.names):  # names of the module itself, not only its submodules
+                out.add(base)
     return out
 
 
@@ -95,3 +97,78 @@ def test_each_command_has_its_module_and_tests_and_cli_modules_stay_small():
             with open(os.path.join(cli_dir, n)) as f:
                 sizes[n] = len(f.read().splitlines())
     assert max(sizes.values()) < 150, sizes
+
+
+#: The runtime's stages in the order a capture runs them; a module may import its own stage and the
+#: ones before it, never one after (``base``: the top-level modules every stage uses).
+STAGES = ("base", "ingest", "rectify", "infer", "write", "run", "cli", "entry")
+#: The most top-level modules ``svbrdf_cli`` may have (besides its stage packages).
+MAX_TOP_MODULES = 8
+
+
+def _stage(module):
+    """The stage of a ``svbrdf_cli`` module (``entry``: the package itself, the public library entry)."""
+    parts = module.split(".")
+    if len(parts) == 1:
+        return "entry"
+    return parts[1] if parts[1] in STAGES and len(parts) > 2 or parts[1] in STAGES[1:7] and len(parts) == 2 \
+        and os.path.isdir(os.path.join(ROOT, *parts)) else "base"
+
+
+def test_the_runtime_has_its_stage_packages_and_few_top_level_modules():
+    top = sorted(n for n in os.listdir(os.path.join(ROOT, "svbrdf_cli")) if n.endswith(".py"))
+    assert len(top) <= MAX_TOP_MODULES, top
+    for stage in STAGES[1:7]:
+        assert os.path.isfile(os.path.join(ROOT, "svbrdf_cli", stage, "__init__.py")), stage
+
+
+def test_no_import_runs_back_up_the_stages():
+    graph, _ = _graph()
+    bad = []
+    for m, deps in graph.items():
+        if not m.startswith("svbrdf_cli"):
+            continue
+        for d in deps:
+            if not d.startswith("svbrdf_cli"):
+                continue
+            if STAGES.index(_stage(d)) > STAGES.index(_stage(m)):
+                bad.append(f"{m} ({_stage(m)}) imports {d} ({_stage(d)})")
+    assert not bad, "imports that run back up the stages:\n" + "\n".join(sorted(bad))
+
+
+def test_the_runtime_never_imports_the_training_package_nor_training_its_studies():
+    graph, _ = _graph()
+    bad = [f"{m} imports {d}" for m, deps in graph.items() for d in deps
+           if (m.startswith("svbrdf_cli") and d.startswith("export"))
+           or (m.startswith("export") and not m.startswith("export.studies") and d.startswith("export.studies"))]
+    assert not bad, "\n".join(sorted(bad))
+
+
+def _private_uses(path, modules):
+    """``module._name`` and ``from module import _name`` of our modules in one file."""
+    with open(path, encoding="utf-8") as f:
+        tree = ast.parse(f.read())
+    aliases, found = {}, []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.module and node.module.split(".")[0] in PACKAGES:
+            for a in node.names:
+                full = f"{node.module}.{a.name}"
+                if full in modules:
+                    aliases[a.asname or a.name] = full
+                elif a.name.startswith("_") and not a.name.startswith("__"):
+                    found.append(f"from {node.module} import {a.name}")
+        elif isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name in modules and a.asname:
+                    aliases[a.asname] = a.name
+    for node in ast.walk(tree):
+        if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id in aliases
+                and node.attr.startswith("_") and not node.attr.startswith("__")):
+            found.append(f"{aliases[node.value.id]}.{node.attr}")
+    return found
+
+
+def test_no_module_uses_another_modules_private_names():
+    _, modules = _graph()
+    bad = [f"{m}: {u}" for m, p in modules.items() for u in _private_uses(p, modules)]
+    assert not bad, "private names used across modules:\n" + "\n".join(sorted(bad))

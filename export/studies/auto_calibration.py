@@ -33,7 +33,7 @@ import click
 import numpy as np
 import torch
 
-from export.studies.evaluate import relight_rmse
+from export.studies.evaluate import chw, relight_rmse
 from export.files import command_errors, write_json
 from svbrdf_cli.infer import auto as auto_tier
 from svbrdf_cli import conventions as cv
@@ -49,13 +49,9 @@ MARGIN = 0.02
 CALIBRATION_SAMPLES = 128
 
 
-def _chw(maps):
-    return {k: torch.from_numpy(np.ascontiguousarray(v)).permute(2, 0, 1).float() for k, v in maps.items()}
-
-
 def tier_error(stored, gt):
     """Re-rendering RMSE (9 lights) of stored maps against linear (C, H, W) ground truth."""
-    return relight_rmse(_chw(stored_to_linear({k: stored[k] for k in cv.MAP_NAMES})), gt)
+    return relight_rmse(chw(stored_to_linear({k: stored[k] for k in cv.MAP_NAMES})), gt)
 
 
 def generated(count, seed=CALIBRATION_SEED, size=256):

@@ -47,7 +47,7 @@ import torch
 from export.studies import methods as method_zoo
 from export.studies.auto_calibration import CALIBRATION_SAMPLES, calibrate, calibration_table, generated
 from export.studies.auto_calibration import evidence as auto_evidence, evidence_table as auto_table
-from export.studies.evaluate import fit_intensity, load_des19, relight_rmse, score, score_predictions
+from export.studies.evaluate import chw, fit_intensity, load_des19, relight_rmse, score, score_predictions
 from export.files import command_errors, shared_root
 from export.render.brdf import render_maps
 from svbrdf_cli import conventions as cv
@@ -58,14 +58,10 @@ from svbrdf_cli.write.mapset import read_map_set, read_stored_maps, stored_to_li
 MAPS = cv.MAP_NAMES
 
 
-def _chw(maps):
-    return {k: torch.from_numpy(np.ascontiguousarray(v)).permute(2, 0, 1).float() for k, v in maps.items()}
-
-
 def des19_accuracy(method, samples, des19, out):
     """({map: rmse (reference scorer), relight: mean 9-light RMSE}, per-sample relighting RMSEs) of ``method``."""
     scores, rel, _, _ = score_predictions(samples, des19, out,
-                                          lambda name, photo: _chw(method(photo.permute(1, 2, 0).numpy())))
+                                          lambda name, photo: chw(method(photo.permute(1, 2, 0).numpy())))
     return scores, rel
 
 
@@ -73,7 +69,7 @@ def paper_accuracy(samples, des19):
     """The paper's published Des19 outputs, scored like a method."""
     maps, _ = score(des19, prefix="paper_")
     paper = {k: f"paper_{k}" for k in MAPS}
-    rel = [relight_rmse(_chw(read_map_set(os.path.join(des19, name), paper, linear_albedo=True)), gt)
+    rel = [relight_rmse(chw(read_map_set(os.path.join(des19, name), paper, linear_albedo=True)), gt)
            for name, _, gt in samples]
     return {**maps, "relight": float(np.mean(rel))}
 
@@ -105,7 +101,7 @@ class NineLights:
         return network_input(cv.image_to_linear(self.photos[0]))
 
     def _render(self, lin, i):
-        m = {k: v[None] for k, v in _chw(lin).items()}
+        m = {k: v[None] for k, v in chw(lin).items()}
         return render_maps(m, light=self.lights[i], camera=self.lights[i], intensity=1.0)[0].permute(1, 2, 0).numpy()
 
     def relight_rmse(self, stored):

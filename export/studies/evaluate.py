@@ -48,6 +48,11 @@ RELIGHT = [(0.0, 0.0, cv.CAMERA_HEIGHT)] + [
     (1.2 * np.cos(a), 1.2 * np.sin(a), cv.CAMERA_HEIGHT) for a in np.linspace(0, 2 * np.pi, 9)[:-1]]
 
 
+def chw(maps):
+    """{name: (H, W, C) numpy map} -> {name: (C, H, W) float32 torch tensor}."""
+    return {k: torch.from_numpy(np.ascontiguousarray(v)).permute(2, 0, 1).float() for k, v in maps.items()}
+
+
 def load_des19(folder):
     """[(name, input (3, H, W) tensor, linear GT maps dict of (C, H, W))].
 

@@ -36,7 +36,8 @@ import numpy as np
 import torch
 
 from export.studies import methods as method_zoo
-from export.studies.benchmark import NineLights, _chw
+from export.studies.benchmark import NineLights
+from export.studies.evaluate import chw
 from export.studies.evaluate import load_des19, relight_rmse, render, score
 from export.files import command_errors, shared_root
 from svbrdf_cli import conventions as cv
@@ -69,7 +70,7 @@ def generated_relight(method, samples):
     flash = (0.0, 0.0, cv.CAMERA_HEIGHT)
     errs = []
     for image, gt in samples:
-        pred = _chw(stored_to_linear({k: v for k, v in method(image).items() if k in cv.MAP_NAMES}))
+        pred = chw(stored_to_linear({k: v for k, v in method(image).items() if k in cv.MAP_NAMES}))
         a, b = (render(*(m[k][None] for k in cv.MAP_NAMES), light=flash) for m in (pred, gt))
         k = float((a * b).sum() / (a * a).sum().clamp_min(1e-12))
         pred["diffuse"], pred["specular"] = pred["diffuse"] * k, (pred["specular"] * k).clamp(0, 1)
@@ -102,7 +103,7 @@ def des19(method, samples, des19_dir, out):
     rel = []
     for name, photo, gt in samples:
         stored = method(photo.permute(1, 2, 0).numpy())
-        lin = cv.decode_maps(_chw(stored), axis=0)
+        lin = cv.decode_maps(chw(stored), axis=0)
         write_map_set(os.path.join(out, name), {k: v.permute(1, 2, 0).numpy() for k, v in lin.items()})
         rel.append(held_out_relight(lin, gt))
     maps, _ = score(des19_dir, out)
@@ -186,7 +187,7 @@ def figure(photos, path, iterations=refine.DEFAULT_ITERATIONS, tile=192, side_li
             cells += [(f"{k}, physical", before[k]), (f"{k}, refined", after[k])]
         for label, st in (("side light, physical", before), ("side light, refined", after)):
             lin_maps = cv.decode_maps(st)
-            k = refine.fit_intensity(cv.image_to_linear(image), refine._params(st), geo)
+            k = refine.fit_intensity(cv.image_to_linear(image), refine.parameters(st), geo)
             cells.append((label, cv.image_to_encoded(render_maps(lin_maps, light=side_light, intensity=k))))
         rows.append(np.concatenate([captioned_tile(img, title, tile) for title, img in cells], 1))
     write_image(path, np.concatenate(rows, 0).astype(np.float32) / 255)

@@ -1,11 +1,11 @@
 """``svbrdf batch``: a folder of photos, resumable, here or on a Ray cluster."""
 
-import sys
 
 import click
 
 from svbrdf_cli.run.batch import PHOTO_EXTENSIONS, collect_inputs, run_local
 from svbrdf_cli.cli.options import capture_options, finish
+from svbrdf_cli.cli.progress import TerminalReport
 from svbrdf_cli.write.gallery import write_gallery
 from svbrdf_cli.run.ray_engine import is_uri
 
@@ -42,20 +42,20 @@ def batch_cmd(folder, job, engine, address, workers):
     if not files:
         raise click.UsageError(f"no photos in '{folder}' (looked for {', '.join(sorted(PHOTO_EXTENSIONS))} and RAW files).")
     failures = []
+    report = TerminalReport(job.quiet)
     if engine == "ray":
-        from tqdm import tqdm
-
         from svbrdf_cli.run.ray_engine import run_ray
 
         def err(msg):
-            tqdm.write(f"error: {msg}", file=sys.stderr)
+            report.failed(msg)
             failures.append(msg)
 
         counts = run_ray(files, job, address=address, workers=workers, err=err)
     elif is_uri(job.output):
         raise click.UsageError(f"'{job.output}' is a URI: use --engine ray, or a local folder.")
     else:
-        counts = run_local(files, job, failures)
+        with report.lines_above_bars():
+            counts = run_local(files, job, failures, report)
     if not is_uri(job.output):
         write_gallery(job.output, failures)  # index.html: every set in the folder, this run's failures
     finish(counts, ignored, job.quiet)

@@ -7,6 +7,7 @@ import click
 
 from svbrdf_cli.run.batch import collect_inputs, run_local
 from svbrdf_cli.cli.options import capture_options, finish
+from svbrdf_cli.cli.progress import TerminalReport
 
 
 @click.command("capture")
@@ -33,4 +34,6 @@ def capture_cmd(inputs, job):
         raise click.UsageError("no photos found in " + ", ".join(f"'{p}'" for p in inputs) + ".")
     if job.opts.name and len(files) > 1:
         raise click.UsageError(f"--name names one material; {len(files)} photos were given.")
-    finish(run_local(files, job), ignored, job.quiet)
+    with TerminalReport(job.quiet).lines_above_bars() as report:
+        counts = run_local(files, job, report=report)
+    finish(counts, ignored, job.quiet)

@@ -137,6 +137,14 @@ class AutoModel:
     def used(self):
         return self._used
 
+    @property
+    def found(self):
+        return self._used.found if self._used is not None else None
+
+    @property
+    def any_size(self):
+        return self._used is not None and self._used.any_size
+
     def __call__(self, image):
         ladder, steps = self.rule["ladder"], self.rule["steps"]
         timings, trace = {}, []

@@ -67,7 +67,10 @@ def installed_tiers():
 
 
 class Chain:
-    """masks -> aux -> maps, as trained (see ``export/nets/chain.py``)."""
+    """masks -> aux -> maps, as trained (see ``export/nets/chain.py``); a :class:`svbrdf_cli.infer.model.Model`."""
+
+    #: Runs at its export's resolution: the capture upsamples its maps.
+    any_size = False
 
     def __init__(self, folder, threads=0):
         self.folder = os.fspath(folder)
@@ -110,6 +113,7 @@ class Chain:
                 files = json.load(f).get("export", {}).get("files", {})
             self.files = {k: v.get("sha256", "")[:16] for k, v in files.items()}
         self.timings = {}  # seconds of each stage in the last call
+        self.found = None  # the physical estimate's findings, for a network that refines it
 
     @property
     def used(self):
@@ -151,7 +155,8 @@ class Chain:
             from svbrdf_cli.infer import physical
 
             t0 = time.perf_counter()  # the estimate of the photo as it is (its geometry), padded like it
-            est = np.pad(physical.network_input(img), pad, mode=mode)
+            est, self.found = physical.network_input(img)
+            est = np.pad(est, pad, mode=mode)
             feeds[PHYSICAL_INPUT] = np.ascontiguousarray(est.transpose(2, 0, 1)[None])
             self.timings["physical"] = time.perf_counter() - t0
         for stage in self.stages:

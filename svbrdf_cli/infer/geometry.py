@@ -55,24 +55,6 @@ class CaptureGeometry:
                 "focal_35mm": self.focal_35mm, "sources": dict(self.sources)}
 
 
-def focal_35mm(path):
-    """The photo's 35 mm-equivalent focal length from its EXIF (None when absent or unreadable)."""
-    try:
-        import OpenImageIO as oiio
-
-        inp = oiio.ImageInput.open(str(path))
-        if not inp:
-            oiio.geterror()
-            return None
-        try:
-            f = inp.spec().getattribute("Exif:FocalLengthIn35mmFilm")
-        finally:
-            inp.close()
-        return float(f) if f and 0 < float(f) < 2000 else None
-    except Exception:  # a name the library cannot open, a broken EXIF block: no focal length, no error
-        return None
-
-
 def crop_height(focal, photo_size, crop_side):
     """Height above the surface, in surface units, of a camera with 35 mm-equivalent ``focal`` (mm)
     whose ``photo_size`` = (width, height) pixel photo holds a square crop of ``crop_side`` pixels."""
@@ -146,20 +128,21 @@ def estimate(image, height=None, focal=None, photo_size=None, box=None):
     return CaptureGeometry(camera=(cx, cy, z), light=light, highlight=(hx, hy), focal_35mm=focal, sources=sources)
 
 
-def for_capture(image, path, photo_shape, crop_report, found=None):
+def for_capture(image, focal, photo_shape, crop_report, found=None):
     """:func:`estimate` for one ``svbrdf capture`` job.
 
     Args:
         image: the network input (encoded crop).
-        path: the photo's file (its EXIF focal length is read when present).
+        focal: the photo's 35 mm-equivalent focal length from its EXIF
+            (:attr:`svbrdf_cli.ingest.photo.Photo.focal_35mm`), or None.
         photo_shape: the decoded photo's (height, width, ...).
         crop_report: the crop's report (:class:`svbrdf_cli.rectify.crops.Crop`): an ``auto`` or ``none`` crop
             has a ``box`` in the photo; a rectified one has none.
-        found: the physical estimate's findings when the model was the physical estimate (its flash
-            height); otherwise the estimate is run for it.
+        found: the physical estimate's findings when the model computed it
+            (:attr:`svbrdf_cli.infer.model.Model.found`: its flash height); otherwise the estimate is
+            run for it.
     """
     box = crop_report.get("box") if crop_report.get("mode") in ("auto", "none") else None
-    focal = focal_35mm(path)
     height = None
     if not focal or box is None:
         if not found or "flash_height" not in found:

@@ -532,14 +532,21 @@ def estimate(image, geo=None, with_fit=False):
 
 
 def network_input(image):
-    """The estimate as a refining network takes it: (H, W, 10) stored maps stacked in
-    :data:`svbrdf_cli.conventions.MAP_NAMES` order (normal 3, diffuse 3, roughness 1, specular 3)."""
-    stored, _ = estimate(image)
-    return np.concatenate([stored[k] for k in cv.MAP_NAMES], -1)
+    """The estimate as a refining network takes it.
+
+    Args:
+        image: (H, W, 3) float32 encoded photo in [0, 1].
+
+    Returns:
+        ((H, W, 10) float32 stored maps stacked in :data:`svbrdf_cli.conventions.MAP_NAMES` order
+        (normal 3, diffuse 3, roughness 1, specular 3), the estimate's findings (:func:`estimate`)).
+    """
+    stored, found = estimate(image)
+    return np.concatenate([stored[k] for k in cv.MAP_NAMES], -1), found
 
 
 class PhysicalModel:
-    """``--model physical``: :func:`estimate` behind :class:`svbrdf_cli.infer.chain.Chain`'s interface."""
+    """``--model physical``: :func:`estimate` as a :class:`svbrdf_cli.infer.model.Model`."""
 
     tier = "physical"
     stages = ()

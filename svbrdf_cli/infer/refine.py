@@ -308,7 +308,7 @@ def _without_radial_trend(change, radial):
     return out
 
 
-def _params(stored):
+def parameters(stored):
     """Stored maps -> optimisation parameters."""
     lin = cv.decode_maps(stored)
     return {"tilt": shading.normal_to_tilt(lin["normal"], TILT_LIMIT),
@@ -381,7 +381,7 @@ def refine(image, stored, geometry, iterations=DEFAULT_ITERATIONS, priors=None, 
     priors = priors or Priors()
     photo = cv.image_to_linear(np.asarray(image, np.float32)).astype(np.float32)
     side = photo.shape[0]
-    start = _params({k: np.asarray(v, np.float32) for k, v in stored.items()})
+    start = parameters({k: np.asarray(v, np.float32) for k, v in stored.items()})
     weight = _unclipped(photo)  # (once: the intensity's fit and the full-size problem share it)
     intensity = fit_intensity(photo, start, geometry, weight)
     full = _Problem(photo, start, geometry, intensity, priors, side, weight)
@@ -456,7 +456,7 @@ def transfer(start, refined, target):
     Returns:
         stored-encoding maps at the output size (roughness one channel).
     """
-    a, b, t = (_params({k: np.asarray(v, np.float32) for k, v in m.items()}) for m in (start, refined, target))
+    a, b, t = (parameters({k: np.asarray(v, np.float32) for k, v in m.items()}) for m in (start, refined, target))
     side = t["tilt"].shape[0]
     p = {k: (t[k] + _at(b[k] - a[k], side)).astype(np.float32) for k in t}
     _project(p)

@@ -46,6 +46,8 @@ class Photo:
     kind: str                   # "raw", "encoded" or "linear"
     bits: int
     scale: float = 1.0          # decoded at this fraction of the file's size (1/2, 1/4 ...)
+    sha256: str | None = None   # of the file's bytes (read once, with the checks of its format)
+    focal_35mm: float | None = None  # 35 mm-equivalent focal length from the EXIF, when it has one
 
 
 def load_photo(path, white_balance=None, min_side=None):
@@ -66,8 +68,16 @@ def load_photo(path, white_balance=None, min_side=None):
     if os.path.getsize(path) == 0:
         raise ImageReadError(f"Could not read '{path}': the file is empty. Copy it from the camera again.")
     ext = os.path.splitext(path)[1].lower()
+    with open(path, "rb") as f:  # the one read of the file in Python: its hash and format checks
+        data = f.read()
     with _openable(path) as name:  # (``name``: what the decoders open; messages name ``path``)
-        photo = _load_raw(path, name, min_side) if ext in RAW_EXTENSIONS else _load_image(path, name, min_side)
+        if ext in RAW_EXTENSIONS:
+            photo = _load_raw(path, name, min_side)
+            photo.focal_35mm = _exif_focal_35mm(name)  # (LibRaw does not give it)
+        else:
+            photo = _load_image(path, name, min_side, data)
+    photo.sha256 = hashlib.sha256(data).hexdigest()
+    del data
     _check_exposed(path, photo.linear)
     if white_balance is not None:
         photo.linear = photo.linear * np.asarray(white_balance, np.float32).reshape(1, 1, 3)
@@ -143,28 +153,52 @@ _MAGIC = {b"\xff\xd8\xff": "jpeg", b"\x89PNG\r\n\x1a\n": "png"}
 _HEIF_BRANDS = (b"heic", b"heix", b"hevc", b"hevx", b"heim", b"heis", b"mif1", b"msf1", b"avif")
 
 
-def _sniff(path):
+def _sniff(data):
     """The file's format from its first bytes: "jpeg", "png", "heif" or None (let OpenImageIO decide)."""
-    with open(path, "rb") as f:
-        head = f.read(16)
+    head = bytes(data[:16])
     for magic, kind in _MAGIC.items():
         if head.startswith(magic):
             return kind
     return "heif" if head[4:8] == b"ftyp" and head[8:12] in _HEIF_BRANDS else None
 
 
-def _truncated(path, kind):
-    """Whether a JPEG or PNG ends before its image does: no EOI marker after the last scan (JPEG), no
-    IEND chunk at the end (PNG). Decoders fill a cut image with grey and carry on; we refuse it."""
-    import mmap
-
-    with open(path, "rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as m:
-        if kind == "png":
-            return m.rfind(b"IEND", max(0, len(m) - 64)) < 0
-        if kind == "jpeg":
-            sos = m.rfind(b"\xff\xda")
-            return sos < 0 or m.find(b"\xff\xd9", sos) < 0
+def _truncated(data, kind):
+    """Whether a JPEG or PNG (its bytes ``data``) ends before its image does: no EOI marker after the
+    last scan (JPEG), no IEND chunk at the end (PNG). Decoders fill a cut image with grey and carry on;
+    we refuse it."""
+    if kind == "png":
+        return data.rfind(b"IEND", max(0, len(data) - 64)) < 0
+    if kind == "jpeg":
+        sos = data.rfind(b"\xff\xda")
+        return sos < 0 or data.find(b"\xff\xd9", sos) < 0
     return False
+
+
+def _focal_of(spec):
+    """The 35 mm-equivalent focal length in an OpenImageIO spec's EXIF (None when absent or implausible)."""
+    f = spec.getattribute("Exif:FocalLengthIn35mmFilm")
+    try:
+        return float(f) if f and 0 < float(f) < 2000 else None
+    except (TypeError, ValueError):
+        return None
+
+
+def _exif_focal_35mm(name):
+    """The focal length of a file LibRaw decodes, from OpenImageIO's read of its header (None when absent
+    or unreadable)."""
+    try:
+        import OpenImageIO as oiio
+
+        inp = oiio.ImageInput.open(name)
+        if not inp:
+            oiio.geterror()
+            return None
+        try:
+            return _focal_of(inp.spec())
+        finally:
+            inp.close()
+    except Exception:  # a name the library cannot open, a broken EXIF block: no focal length, no error
+        return None
 
 
 @contextlib.contextmanager
@@ -244,14 +278,14 @@ def _decode_strips(inp, spec, factor):
     return out
 
 
-def _load_image(path, name, min_side=None):
+def _load_image(path, name, min_side=None, data=b""):
     import OpenImageIO as oiio
 
-    kind = _sniff(path)
+    kind = _sniff(data)
     if kind == "heif":
         raise ImageReadError(f"Could not read '{path}': HEIC/HEIF photos are not supported. Export it as JPEG "
                              "(iPhone: Settings > Camera > Formats > Most Compatible).")
-    if kind in ("jpeg", "png") and _truncated(path, kind):
+    if kind in ("jpeg", "png") and _truncated(data, kind):
         raise ImageReadError(f"Could not read '{path}': the file is truncated (its end is missing). "
                              "Copy it from the camera again.")
     config = oiio.ImageSpec()
@@ -262,6 +296,7 @@ def _load_image(path, name, min_side=None):
         raise ImageReadError(f"Could not read '{path}': {why}. Use a JPEG, PNG, TIFF, EXR or camera RAW file.")
     try:
         spec = inp.spec()
+        focal = _focal_of(spec)
         w, h = spec.width, spec.height
         _check_size(path, kind, w, h)
         factor = _reduction(w, h, min_side)
@@ -300,7 +335,7 @@ def _load_image(path, name, min_side=None):
         np.maximum(rgb, 0.0, out=rgb)
     elif floating is not None:  # (None: decoded to linear already)
         _srgb_to_linear_inplace(rgb)
-    return Photo(rgb, path, "linear" if floating else "encoded", bits, 1.0 / factor)
+    return Photo(rgb, path, "linear" if floating else "encoded", bits, 1.0 / factor, focal_35mm=focal)
 
 
 def _channels(px, spec):
@@ -371,11 +406,3 @@ def _srgb8_to_linear(rgb):
     import cv2
 
     return cv2.LUT(rgb, _SRGB8_TO_LINEAR)
-
-
-def file_sha256(path):
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()

@@ -14,7 +14,6 @@ import concurrent.futures
 import dataclasses
 import logging
 import os
-import sys
 import time
 from typing import NamedTuple
 
@@ -40,6 +39,28 @@ class Job:
     threads: int = 0        # onnxruntime threads (0: one per core)
     skip_done: bool = False  # skip photos whose set is complete (batch: resume); else they fail without --force
     quiet: bool = False
+
+
+class Report:
+    """What a run tells as it goes; this one tells nothing (:mod:`svbrdf_cli.cli` draws a terminal's)."""
+
+    def start(self, total):
+        """``total`` photos are to be converted."""
+
+    def failed(self, message):
+        """A photo failed: its one-line ``message`` (naming the file and the fix)."""
+
+    def converted(self, photo, folder, record, seconds):
+        """``photo`` became the set ``folder`` (``record``: its ``material.json``) in ``seconds``."""
+
+    def advanced(self):
+        """One more photo is finished (converted or failed)."""
+
+    def refine_step(self, done, total):
+        """Step ``done`` of ``total`` of the current photo's ``--refine``."""
+
+    def finish(self):
+        """The run is over."""
 
 
 class Counts(NamedTuple):
@@ -116,17 +137,16 @@ def describe_failure(f, e):
     return f"'{f}': unexpected {type(e).__name__}: {first} (rerun with -vv for details; please report it)."
 
 
-def run_local(files, job, failures=None):
-    """Convert ``files`` in this process; returns :class:`Counts`. Errors, log lines and (unless quiet)
-    one line per converted photo go to stderr above the progress bar, which is shown only on a
-    terminal (a log file gets the lines alone); ``failures``, a list, also receives each error line."""
-    from tqdm import tqdm
-    from tqdm.contrib.logging import logging_redirect_tqdm
-
+def run_local(files, job, failures=None, report=None):
+    """Convert ``files`` in this process; returns :class:`Counts`. ``report`` (a :class:`Report`) is
+    told of each failure and converted photo as the run goes; ``failures``, a list, also receives each
+    failure's line."""
     from svbrdf_cli.infer.registry import load_model
 
+    report = report or Report()
+
     def err(msg):
-        tqdm.write(f"error: {msg}", file=sys.stderr)  # above the progress bar, never inside it
+        report.failed(msg)
         if failures is not None:
             failures.append(msg)
 
@@ -137,8 +157,7 @@ def run_local(files, job, failures=None):
     chain = load_model(job.model, threads=job.threads)
     clean_partials(job.output)
     done = 0
-    bar = tqdm(total=len(todo), unit="photo", file=sys.stderr, dynamic_ncols=True,
-               disable=job.quiet or len(todo) < 2 or not sys.stderr.isatty())
+    report.start(len(todo))
 
     def report_failure(f, e):
         log.debug("details", exc_info=e)
@@ -154,19 +173,15 @@ def run_local(files, job, failures=None):
             report_failure(f, e)
         else:
             done += 1
-            crop = record["crop"]
-            how = crop["mode"] + (f" on the {crop['anchor']}" if crop.get("anchor") else "")
-            if not job.quiet:
-                tqdm.write(f"{f} -> {folder} ({record['size']}x{record['size']}, crop {how}, "
-                           f"{time.perf_counter() - t0:.1f} s)", file=sys.stderr)
-        bar.update(1)
+            report.converted(f, folder, record, time.perf_counter() - t0)
+        report.advanced()
 
     # Read and crop the next photo while the current one is in the networks, and write the previous
     # set on another thread meanwhile: at most one set waits to be written (memory stays bounded).
     reader = concurrent.futures.ThreadPoolExecutor(max_workers=1)
     writer = concurrent.futures.ThreadPoolExecutor(max_workers=1)
     writing = None
-    with reader, writer, logging_redirect_tqdm():
+    with reader, writer:
         pending = reader.submit(pipeline.prepare, todo[0], job.opts)
         for i, f in enumerate(todo):
             t0 = time.perf_counter()
@@ -180,7 +195,8 @@ def run_local(files, job, failures=None):
             write = None
             if prepared is not None:
                 try:
-                    write = pipeline.infer_set(prepared, chain, job.output, job.opts, model_name=job.model)
+                    write = pipeline.infer_set(prepared, chain, job.output, job.opts, model_name=job.model,
+                                               progress=report.refine_step)
                 except Exception as e:  # noqa: BLE001
                     report_failure(f, e)
                 del prepared
@@ -190,8 +206,8 @@ def run_local(files, job, failures=None):
             if write is not None:
                 writing = (f, t0, writer.submit(write))
             else:
-                bar.update(1)
+                report.advanced()
         if writing is not None:
             finish(writing)
-    bar.close()
+    report.finish()
     return Counts(done, skipped, len(todo) - done + failed)

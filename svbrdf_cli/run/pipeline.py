@@ -136,39 +136,31 @@ def prepare(path, opts):
     return Prepared(os.fspath(path), photo, c, small, float(gain), {"read": t1 - t0, "crop": t2 - t1})
 
 
-def refine_maps(prepared, chain, net_in, stored, iterations):
+def refine_maps(prepared, chain, net_in, stored, iterations, progress=None):
     """``--refine``: the capture's geometry from the photo, then :func:`svbrdf_cli.infer.refine.refine` at the
-    network's size, with a progress bar on a terminal (not with --quiet). Returns (maps, record entries)."""
-    import sys
-
-    from tqdm import tqdm
-
+    network's size; ``progress(done, iterations)`` after each step. Returns (maps, record entries)."""
     from svbrdf_cli.infer import geometry
     from svbrdf_cli.infer import refine
 
     p = prepared
-    found = getattr(getattr(chain, "used", chain), "found", None)
-    geo = geometry.for_capture(net_in, p.path, p.photo.linear.shape, p.crop.report, found)
-    bar = tqdm(total=iterations, unit="step", desc="refine", leave=False, file=sys.stderr, dynamic_ncols=True,
-               disable=not (sys.stderr.isatty() and log.isEnabledFor(logging.WARNING)))
-    try:
-        res = refine.refine(net_in, stored, geo, iterations, progress=lambda n: bar.update(1))
-    finally:
-        bar.close()
+    geo = geometry.for_capture(net_in, p.photo.focal_35mm, p.photo.linear.shape, p.crop.report, chain.used.found)
+    step = (lambda n: progress(n, iterations)) if progress else None
+    res = refine.refine(net_in, stored, geo, iterations, progress=step)
     log.info("refine: photo loss %.5f -> %.5f in %.2f s", res.report["photo_loss_before"],
              res.report["photo_loss_after"], res.report["seconds"])
     return res.stored, {"geometry": geo.report(), "refine": res.report}
 
 
-def capture(prepared, chain, out_root, opts, model_name="fast"):
+def capture(prepared, chain, out_root, opts, model_name="fast", progress=None):
     """Infer and write the texture set of a :class:`Prepared` photo; returns (folder, record)."""
-    return infer_set(prepared, chain, out_root, opts, model_name)()
+    return infer_set(prepared, chain, out_root, opts, model_name, progress)()
 
 
-def infer_set(prepared, chain, out_root, opts, model_name="fast"):
+def infer_set(prepared, chain, out_root, opts, model_name="fast", progress=None):
     """The model's part of :func:`capture` (infer, refine, upsample): returns a function of no
     arguments that writes the set (preview, PNG encoding, the atomic rename) and returns (folder,
-    record). A batch runs it on a thread while the next photo is in the model."""
+    record). A batch runs it on a thread while the next photo is in the model. ``progress(done,
+    total)``: called after each step of ``--refine``."""
     from svbrdf_cli.write.mapset import stored_to_linear
 
     p = prepared
@@ -184,12 +176,12 @@ def infer_set(prepared, chain, out_root, opts, model_name="fast"):
     stored = {k: out[k] for k in cv.MAP_NAMES}
     refined = None
     if opts.refine:
-        low_refined, refined = refine_maps(p, chain, net_in, stored, opts.refine)
+        low_refined, refined = refine_maps(p, chain, net_in, stored, opts.refine, progress)
         timings["refine"] = refined["refine"]["seconds"]
     t_up = time.perf_counter()
     high = ingest.encode_for_network(resize(p.crop.image, side), gain, fast=True) if side != NETWORK_SIZE else net_in
     upsampling = opts.upsample if side != NETWORK_SIZE else None
-    if side != NETWORK_SIZE and getattr(chain.used, "any_size", False):
+    if side != NETWORK_SIZE and chain.used.any_size:
         # a model that runs at any size (the physical estimate) runs again at the output size: the
         # photo's own detail, not an upsampled map (docs/capture.md, "Resolution")
         full = chain.used(high)
@@ -227,7 +219,7 @@ def infer_set(prepared, chain, out_root, opts, model_name="fast"):
         "tool": f"svbrdf {__version__}",
         "conventions_version": cv.CONVENTIONS_VERSION,
         "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        "input": {"file": os.path.abspath(p.path), "sha256": None, "kind": p.photo.kind,
+        "input": {"file": os.path.abspath(p.path), "sha256": p.photo.sha256, "kind": p.photo.kind,
                   "bits": p.photo.bits, "width": int(p.photo.linear.shape[1]), "height": int(p.photo.linear.shape[0]),
                   "decoded_at": p.photo.scale},
         "model": {"name": model_name, **chain.describe()},
@@ -256,7 +248,6 @@ def _write_set(path, folder, opts, record, timings, stored, maps, net_in, out, c
     from svbrdf_cli.write.presets import write_preset
 
     t2 = time.perf_counter()
-    record["input"]["sha256"] = ingest.file_sha256(path)
     # the preview is made and encoded on the same threads as the maps (write_preset's images)
     images = [("preview.png", functools.partial(preview_image, net_in, stored), 8, True)] if opts.preview else []
 
