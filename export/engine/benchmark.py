@@ -1,0 +1,89 @@
+"""Training speed of each stage, measured as training runs it (``python -m export.train --benchmark``).
+
+For every stage of a tier: **data** samples/s (:func:`export.engine.batches.make` alone), **step**
+samples/s (the frozen earlier stages' forward passes, the stage's forward, backward and Adam on a
+ready batch) and **loop** samples/s (both, one after the other, as :meth:`export.engine.run.Run.train_step`
+does). All in one process on ``--threads`` threads; the last line is
+``samples/s=<the slowest stage's loop rate> size=<training size>``.
+
+Without a material bank it grows a small one in a temporary folder (two shards; a few seconds).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+
+import torch
+
+from export.engine import bank as bank_mod
+from export.engine import batches, nets
+from export.engine.run import RunConfig, stage_loss
+
+
+def _bank(log):
+    root = bank_mod.default_root()
+    if bank_mod.count(root) >= 2 * bank_mod.SHARD:
+        return bank_mod.Bank(root)
+    tmp = tempfile.mkdtemp(prefix="svbrdf-bank-")
+    log(f"no material bank at {root}: a small one in {tmp}")
+    bank_mod.grow(tmp, 2 * bank_mod.SHARD, progress=None)
+    return bank_mod.Bank(tmp)
+
+
+def _rate(fn, batch, repeats):
+    fn()  # warm-up
+    t = time.perf_counter()
+    for _ in range(repeats):
+        fn()
+    return batch * repeats / (time.perf_counter() - t)
+
+
+def measure(tier="swift", size=None, batch=None, repeats=4, log=print):
+    """[(stage, parameters, data/s, step/s, loop/s)] for every stage of ``tier``."""
+    cfg = RunConfig(tier=tier)
+    size, batch = size or cfg.size, batch or cfg.batch
+    bank = _bank(log)
+    net = nets.build(tier)
+    net.loss_weights = dict(cfg.weights)
+    g = torch.Generator().manual_seed(0)
+    rows = []
+    for stage in nets.STAGES:
+        module = getattr(net, stage)
+        opt = torch.optim.Adam(module.parameters(), lr=cfg.lr, betas=(0.5, 0.9))
+        ready = batches.make(bank, g, batch, size, stage)
+
+        def step(b=None):
+            net.train()
+            loss = stage_loss(net, stage, b if b is not None else ready)
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+
+        data = _rate(lambda: batches.make(bank, g, batch, size, stage), batch, repeats)
+        stepped = _rate(step, batch, repeats)
+        loop = _rate(lambda: step(batches.make(bank, g, batch, size, stage)), batch, repeats)
+        params = sum(p.numel() for p in module.parameters())
+        rows.append((stage, params, data, stepped, loop))
+        log(f"{stage}: {params / 1e6:.2f} M parameters, data {data:.1f}/s, step {stepped:.1f}/s, loop {loop:.1f}/s")
+    return rows, size
+
+
+def table(rows, size, threads):
+    lines = [f"| stage ({size}², {threads} thread{'s' if threads != 1 else ''}) | parameters | data samples/s "
+             "| step samples/s | loop samples/s |", "|---|---|---|---|---|"]
+    lines += [f"| {s} | {p / 1e6:.2f} M | {d:.1f} | {st:.1f} | {lo:.1f} |" for s, p, d, st, lo in rows]
+    return "\n".join(lines)
+
+
+def main(tier="swift", threads=1, log=print):
+    torch.set_num_threads(threads)
+    rows, size = measure(tier, log=lambda m: None)
+    log(table(rows, size, threads))
+    log(f"samples/s={min(r[4] for r in rows):.1f} size={size}")
+    return rows
+
+
+if __name__ == "__main__":
+    main(threads=int(os.environ.get("THREADS", "1")))
