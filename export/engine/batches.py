@@ -33,6 +33,9 @@ SCALE = (0.3, 1.0)
 #: Lights of the highlight-removed renderings' specular part, and the size it is rendered at.
 AUX_SPECULAR_LIGHTS = 12
 AUX_SPECULAR_SIZE = 32
+#: Spread of the flash position the context and base are computed from (see :func:`estimated_flash`).
+FLASH_XY_ERROR = 0.03
+FLASH_HEIGHT_ERROR = 0.1
 STAGE_TARGETS = {"masks": ("M_b", "M_h"), "aux": ("I_bf", "I_hr", "I_hr2"), "maps": ()}
 
 
@@ -151,6 +154,16 @@ def highlight_removed_fast(maps, camera, intensity, lights=AUX_SPECULAR_LIGHTS, 
     return out[0], out[1]
 
 
+def estimated_flash(light, g):
+    """The flash position as a capture would estimate it (from the highlight and the EXIF field of
+    view): the true one moved by ``FLASH_XY_ERROR`` flash heights across and ``FLASH_HEIGHT_ERROR``
+    (log) in height, so the networks do not rely on an exactness the runtime does not have."""
+    n = light.shape[0]
+    xy = torch.randn(n, 2, generator=g) * FLASH_XY_ERROR * light[:, 2:3]
+    z = light[:, 2:3] * (torch.randn(n, 1, generator=g) * FLASH_HEIGHT_ERROR).exp()
+    return torch.cat([light[:, :2] + xy, z], 1)
+
+
 def make(bank, g, batch, size=128, stage="maps"):
     """One batch for ``stage`` (see the module docstring); every tensor (B, C, size, size) float32
     but ``intensity`` (B,).
@@ -165,8 +178,9 @@ def make(bank, g, batch, size=128, stage="maps"):
     capture = {k: v.float() for k, v in capture.items()}
     shot = photograph(maps, capture, g)
     cam, light, intensity = capture["camera"], capture["light"], shot["intensity"]
+    seen = estimated_flash(light, g)
     out = {"photo": shot["photo"], "intensity": intensity, "camera": cam, "light": light,
-           "context": flash.context(cam, light, size), "base": flash.base(shot["photo"], cam, light)}
+           "context": flash.context(seen, seen, size), "base": flash.base(shot["photo"], seen, seen)}
     with torch.no_grad():
         if stage in ("masks", "joint"):
             out["M_b"] = render_targets.bumpiness_mask(maps, light, intensity, image=shot["I"], camera=cam)
