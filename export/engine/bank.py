@@ -16,7 +16,7 @@ and the manifest lists every shard with its materials' sources (``procedural:<fa
   (:func:`export.data.cc0.load_all`), several per set;
 * **mix**: two bank materials blended through a smooth random mask.
 
-``python -m export.engine bank --count 6000`` grows the bank to at least that many materials
+``python -m export.engine bank --count 8000`` grows the bank to at least that many materials
 (appending shards, so an interrupted build keeps what it made); a training run grows it to its
 ``--bank-count`` before it starts. Training loads every shard into memory (:class:`Bank`).
 """
@@ -39,6 +39,8 @@ VERSION = 1
 #: Mix of kinds in a grown bank (the rest procedural).
 CC0_FRACTION = 0.25
 MIX_FRACTION = 0.2
+#: A CC0 shard holds this many crops of each of its sets.
+CC0_CROPS = 8
 #: Mixes blend two materials of the first this many shards (a fixed set: a bank grown in several
 #: sittings is the bank grown at once).
 MIX_SOURCE_SHARDS = 32
@@ -130,17 +132,21 @@ class _Cc0Source:
     def __bool__(self):
         return bool(self.folders)
 
-    def draw(self, g, n):
-        loader, folder = self.folders[int(torch.randint(0, len(self.folders), (1,), generator=g))]
-        try:
-            m = loader(folder, size=1024)
-        except (FileNotFoundError, ValueError):
-            return None
-        maps = {k: torch.from_numpy(np.ascontiguousarray(np.moveaxis(m[k], -1, 0)))[None].expand(n, -1, -1, -1)
-                for k in cv.MAP_NAMES}
-        out = augment.random_geometry({k: v.contiguous() for k, v in maps.items()}, g, SIZE, scale=(0.25, 1.0))
-        name = os.path.basename(folder)
-        return {k: out[k] for k in cv.MAP_NAMES}, [f"cc0:{name}"] * n
+    def draw(self, g, n, per_set=CC0_CROPS):
+        """``n`` crops, ``per_set`` from each of ``n / per_set`` random sets (None: no set loads)."""
+        parts, names = [], []
+        while len(names) < n:
+            loader, folder = self.folders[int(torch.randint(0, len(self.folders), (1,), generator=g))]
+            try:
+                m = loader(folder, size=1024)
+            except (FileNotFoundError, ValueError):
+                continue
+            k = min(per_set, n - len(names))
+            maps = {key: torch.from_numpy(np.ascontiguousarray(np.moveaxis(m[key], -1, 0)))[None]
+                    .expand(k, -1, -1, -1).contiguous() for key in cv.MAP_NAMES}
+            parts.append(augment.random_geometry(maps, g, SIZE, scale=(0.25, 1.0)))
+            names += [f"cc0:{os.path.basename(folder)}"] * k
+        return {key: torch.cat([p[key] for p in parts]) for key in cv.MAP_NAMES}, names
 
 
 def _blend_masks(g, n):
@@ -149,7 +155,7 @@ def _blend_masks(g, n):
     return _blend_mask(g, n, SIZE, "cpu", torch.float32)
 
 
-def grow(root=None, target=6000, seed=0, shared=None, progress=print):
+def grow(root=None, target=8000, seed=0, shared=None, progress=print):
     """Append shards until the bank holds at least ``target`` materials; returns the count.
 
     Every shard draws from a generator seeded with (``seed``, shard index), so a bank grown in
@@ -207,7 +213,7 @@ class Bank:
         shards = manifest["shards"][:limit_shards] if limit_shards is not None else manifest["shards"]
         if not shards:
             raise FileNotFoundError(f"{root}: the material bank is empty; grow it with "
-                                    "`python -m export.engine bank --count 6000`")
+                                    "`python -m export.engine bank --count 8000`")
         parts = {k: [] for k in ("diffuse", "specular", "roughness", "normal")}
         self.sources = []
         for s in shards:

@@ -39,9 +39,10 @@ FLASH_HEIGHT_ERROR = 0.1
 STAGE_TARGETS = {"masks": ("M_b", "M_h"), "aux": ("I_bf", "I_hr", "I_hr2"), "maps": ()}
 
 
-def materials(bank, g, batch, size):
-    """(B, C, size, size) linear maps: random windows of random bank materials, tinted."""
-    idx = torch.randint(0, len(bank), (batch,), generator=g)
+def materials(bank, g, batch, size, index=None):
+    """(B, C, size, size) linear maps: random windows of random bank materials (or those at
+    ``index``), tinted."""
+    idx = torch.randint(0, len(bank), (batch,), generator=g) if index is None else index
     maps = augment.random_geometry(bank.stored(idx), g, size, scale=SCALE)
     maps = augment.jitter_colour(bank_mod.linearize(maps), g)
     maps["roughness"] = maps["roughness"].clamp(0.02, 1.0)
@@ -164,7 +165,7 @@ def estimated_flash(light, g):
     return torch.cat([light[:, :2] + xy, z], 1)
 
 
-def make(bank, g, batch, size=128, stage="maps"):
+def make(bank, g, batch, size=128, stage="maps", index=None):
     """One batch for ``stage`` (see the module docstring); every tensor (B, C, size, size) float32
     but ``intensity`` (B,).
 
@@ -173,7 +174,7 @@ def make(bank, g, batch, size=128, stage="maps"):
         (encoded images, or for ``maps`` the stored maps under ``normal``, ``diffuse``,
         ``roughness``, ``specular``), ``intensity``, ``camera`` and ``light`` (B, 3).
     """
-    maps = materials(bank, g, batch, size)
+    maps = materials(bank, g, batch, size, index)
     capture = simulate.sample_capture(g, batch)
     capture = {k: v.float() for k, v in capture.items()}
     shot = photograph(maps, capture, g)

@@ -6,6 +6,9 @@ ready batch) and **loop** samples/s (both, one after the other, as :meth:`export
 does). All in one process on ``--threads`` threads; the last line is
 ``samples/s=<the slowest stage's loop rate> size=<training size>``.
 
+``--tier fast`` (or ``lite``) measures the same for a tier of the first training loop
+(:mod:`export.train`, :func:`measure_old`): the baseline.
+
 Without a material bank it grows a small one in a temporary folder (two shards; a few seconds).
 """
 
@@ -70,6 +73,41 @@ def measure(tier="swift", size=None, batch=None, repeats=4, log=print):
     return rows, size
 
 
+def measure_old(tier="fast", size=128, batch=16, repeats=2, log=print):
+    """The same rows for a tier of the first training loop (:mod:`export.train`: samples made from
+    scratch by :func:`export.data.dataset.make_batch`, the numpy physical estimate per sample, fp32),
+    on a throw-away run folder; the baseline the engine is measured against."""
+    import contextlib
+    import io
+
+    from export import train as old
+
+    rows = []
+    with tempfile.TemporaryDirectory() as out:
+        cfg = old.RunConfig(tier=tier, size=size, batch=batch)
+        for stage in old.VARIANTS[old.tier_variant(tier)]:
+            with contextlib.redirect_stdout(io.StringIO()):
+                t = old.StageTrainer(stage, out, cfg)
+            ready = t.batch()
+
+            def step(b=None):
+                t.net.eval()
+                t.net.stage(stage).train()
+                t.opt.zero_grad()
+                total, _, _ = t.losses(b if b is not None else ready)
+                total.backward()
+                t.opt.step()
+
+            data = _rate(t.batch, batch, repeats)
+            stepped = _rate(step, batch, repeats)
+            loop = _rate(t.train_step, batch, repeats)
+            params = sum(p.numel() for p in t.net.stage(stage).parameters())
+            rows.append((stage, params, data, stepped, loop))
+            log(f"{stage}: data {data:.1f}/s, step {stepped:.1f}/s, loop {loop:.1f}/s")
+            t.save()  # the next stage loads this one, frozen
+    return rows, size
+
+
 def table(rows, size, threads):
     lines = [f"| stage ({size}², {threads} thread{'s' if threads != 1 else ''}) | parameters | data samples/s "
              "| step samples/s | loop samples/s |", "|---|---|---|---|---|"]
@@ -79,7 +117,10 @@ def table(rows, size, threads):
 
 def main(tier="swift", threads=1, log=print):
     torch.set_num_threads(threads)
-    rows, size = measure(tier, log=lambda m: None)
+    if tier == "swift":
+        rows, size = measure(tier, log=lambda m: None)
+    else:
+        rows, size = measure_old(tier, log=lambda m: None)
     log(table(rows, size, threads))
     log(f"samples/s={min(r[4] for r in rows):.1f} size={size}")
     return rows

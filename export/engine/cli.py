@@ -1,6 +1,6 @@
 """Commands of the training engine.
 
-    python -m export.engine bank --count 6000          # grow the material bank (reused by every run)
+    python -m export.engine bank --count 8000          # grow the material bank (reused by every run)
     python -m export.engine train --run runs/swift     # train, or resume the run in that folder
     python -m export.engine background --run runs/swift  # the same, detached, on one core
     python -m export.engine stop --run runs/swift      # SIGTERM: save and exit 0
@@ -19,7 +19,7 @@ def main():
 
 
 @main.command()
-@click.option("--count", default=6000, show_default=True, help="Grow the bank to at least this many materials.")
+@click.option("--count", default=8000, show_default=True, help="Grow the bank to at least this many materials.")
 @click.option("--root", default=None, help="Bank folder (default $SVBRDF_BANK or ~/.cache/svbrdf/bank).")
 @click.option("--threads", default=1, show_default=True)
 def bank(count, root, threads):
@@ -111,3 +111,34 @@ def stop(folder):
         time.sleep(1)
     os.remove(pid_file)
     click.echo(f"{folder}: stopped and saved")
+
+
+@main.command()
+@click.option("--out", default="docs/figures/bank.png", show_default=True)
+@click.option("--seed", default=0, show_default=True)
+def figure(out, seed):
+    """Draw 64 random bank materials (photo and maps) to OUT."""
+    import cv2
+
+    from export.engine.figure import bank_figure
+
+    _setup(1)
+    sheet = bank_figure(bank_mod.Bank(), seed=seed)
+    cv2.imwrite(out, sheet[..., ::-1])
+    click.echo(f"{out}: {sheet.shape[1]}x{sheet.shape[0]}")
+
+
+@main.command()
+@click.option("--run", "folder", default="runs/swift", show_default=True)
+@click.option("--out", default="docs/figures/learning_curve.png", show_default=True)
+def curve(folder, out):
+    """Plot FOLDER/curve.jsonl to OUT."""
+    import os
+
+    from export.engine import curve as curve_mod
+
+    path = os.path.join(folder, "curve.jsonl")
+    if not os.path.isfile(path):
+        raise click.ClickException(f"{path}: no evaluations yet")
+    curve_mod.plot(curve_mod.read(path), out)
+    click.echo(out)

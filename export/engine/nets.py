@@ -37,8 +37,8 @@ class Widths:
     """Base width and depth of each stage's UNet (at half resolution)."""
 
     masks: tuple = (16, 4)
-    aux: tuple = (24, 4)
-    maps: tuple = (32, 4)
+    aux: tuple = (16, 4)
+    maps: tuple = (24, 4)
 
 
 TIERS = {"swift": Widths()}

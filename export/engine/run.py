@@ -32,6 +32,7 @@ import torch
 
 from export.engine import bank as bank_mod
 from export.engine import batches, flash, nets
+from export.engine import real as real_mod
 from export.files import atomic_torch_save
 from svbrdf_cli import conventions as cv
 
@@ -51,8 +52,13 @@ class RunConfig:
     checkpoint_minutes: float = 10.0
     eval_minutes: float = 30.0
     val_samples: int = 64
-    bank_count: int = 6400
+    bank_count: int = 8000
     bank_root: str | None = None
+    #: Share of the maps stage's steps that are self-supervised batches of real photos
+    #: (:mod:`export.engine.real`), and the weight of their rendering loss.
+    real_fraction: float = 0.25
+    real_weight: float = 1.0
+    real_root: str | None = None
     #: Maps loss weights (stored encodings, L1).
     weights: tuple = (("normal", 2.0), ("diffuse", 1.0), ("roughness", 1.0), ("specular", 1.0))
 
@@ -80,6 +86,18 @@ def stage_loss(net, stage, b):
             aux = net.run_aux(photo, masks, context).clamp(0, 1)
         pred = net.run_maps(photo, masks, aux, b["base"], context)
     return maps_loss(pred, b, net_weights(net))
+
+
+def real_loss(net, b):
+    """The rendering loss of the chain's maps on a batch of real photos (earlier stages frozen)."""
+    photo, light = b["photo"], b["light"]
+    context, base = flash.context(light, light, photo.shape[-1]), flash.base(photo, light, light)
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        with torch.no_grad():
+            masks = net.run_masks(photo, context).clamp(0, 1)
+            aux = net.run_aux(photo, masks, context).clamp(0, 1)
+        pred = net.run_maps(photo, masks, aux, base, context)
+    return real_mod.rendering_loss({k: v.float() for k, v in pred.items()}, photo, light)
 
 
 def net_weights(net):
@@ -123,6 +141,7 @@ class Run:
         if state is not None and state.get("optimizer") is not None:
             self.optimizer.load_state_dict(state["optimizer"])
         self.bank = None
+        self.real = None
         self.des19 = des19
         self.stop_requested = False
 
@@ -159,16 +178,33 @@ class Run:
             self.bank = bank_mod.Bank(root)
         return self.bank
 
+    def load_real(self):
+        """The real training photos (:mod:`export.engine.real`), or False without the shared data."""
+        if self.real is None:
+            from export.files import shared_data
+
+            root = self.config.real_root or os.path.join(shared_data(), "real")
+            train = real_mod.split(root)[0] if os.path.isdir(root) else []
+            self.real = real_mod.RealPhotos(train, log=self.log) if train else False
+            if self.real:
+                self.log(f"real photos: {len(self.real)} in the training pool")
+        return self.real
+
     def train_step(self):
         """One step of the current stage; returns its loss."""
         c = self.config
         bank = self.load_bank()
         t0 = time.process_time()
-        b = batches.make(bank, self.g, c.batch, c.size, self.stage)
+        real = self.stage == "maps" and c.real_fraction > 0 and float(torch.rand(1, generator=self.g)) < c.real_fraction
+        if real and not self.load_real():
+            real = False
         self.net.train()
         for group in self.optimizer.param_groups:
             group["lr"] = self._lr()
-        loss = stage_loss(self.net, self.stage, b)
+        if real:
+            loss = c.real_weight * real_loss(self.net, self.real.batch(self.g, c.batch, c.size))
+        else:
+            loss = stage_loss(self.net, self.stage, batches.make(bank, self.g, c.batch, c.size, self.stage))
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         self.optimizer.step()
