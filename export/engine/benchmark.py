@@ -36,11 +36,13 @@ def _bank(log):
 
 
 def _rate(fn, batch, repeats):
+    """Samples per second of this process's CPU time (on one thread, its wall time when nothing else
+    runs; on a shared machine, what one core of its own would give)."""
     fn()  # warm-up
-    t = time.perf_counter()
+    t = time.process_time()
     for _ in range(repeats):
         fn()
-    return batch * repeats / (time.perf_counter() - t)
+    return batch * repeats / (time.process_time() - t)
 
 
 def measure(tier="swift", size=None, batch=None, repeats=4, log=print):

@@ -18,16 +18,20 @@ from svbrdf_cli import conventions as cv
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
+@pytest.fixture(scope="module", autouse=True)
+def small_shards():
+    """Procedural shards of 16 materials: a bank of a few seconds."""
+    old = bank_mod.CC0_FRACTION, bank_mod.SHARD
+    bank_mod.CC0_FRACTION, bank_mod.SHARD = 0.0, 16
+    yield
+    bank_mod.CC0_FRACTION, bank_mod.SHARD = old
+
+
 @pytest.fixture(scope="module")
-def small_bank(tmp_path_factory):
-    """Two procedural shards (no shared data needed: the CC0 kind falls back to procedural)."""
+def small_bank(tmp_path_factory, small_shards):
+    """Two procedural shards."""
     root = str(tmp_path_factory.mktemp("bank"))
-    old = bank_mod.CC0_FRACTION
-    bank_mod.CC0_FRACTION = 0.0
-    try:
-        bank_mod.grow(root, 2 * bank_mod.SHARD, progress=None)
-    finally:
-        bank_mod.CC0_FRACTION = old
+    bank_mod.grow(root, 2 * bank_mod.SHARD, progress=None)
     return root
 
 
@@ -44,13 +48,8 @@ def test_bank_round_trip_keeps_the_maps(small_bank):
 
 
 def test_bank_grows_the_same_in_two_sittings(tmp_path, small_bank):
-    old = bank_mod.CC0_FRACTION
-    bank_mod.CC0_FRACTION = 0.0
-    try:
-        bank_mod.grow(str(tmp_path), bank_mod.SHARD, progress=None)
-        bank_mod.grow(str(tmp_path), 2 * bank_mod.SHARD, progress=None)
-    finally:
-        bank_mod.CC0_FRACTION = old
+    bank_mod.grow(str(tmp_path), bank_mod.SHARD, progress=None)
+    bank_mod.grow(str(tmp_path), 2 * bank_mod.SHARD, progress=None)
     a, b = bank_mod.Bank(str(tmp_path)), bank_mod.Bank(small_bank)
     for k in a.arrays:
         assert torch.equal(a.arrays[k], b.arrays[k]), k
@@ -153,7 +152,7 @@ def test_sigterm_saves_and_exits_zero(tmp_path, small_bank):
         "sys.path.insert(0, sys.argv[3])\n"
         "from export.engine.run import Run, RunConfig\n"
         "cfg = RunConfig(size=32, batch=2, schedule=(('masks', 10**9),), val_samples=2,\n"
-        "                checkpoint_minutes=1e9, eval_minutes=1e9, bank_root=sys.argv[2], bank_count=128)\n"
+        "                checkpoint_minutes=1e9, eval_minutes=1e9, bank_root=sys.argv[2], bank_count=32)\n"
         "run = Run(sys.argv[1], cfg, log=lambda m: None, des19=[])\n"
         "threading.Timer(3.0, lambda: os.kill(os.getpid(), signal.SIGTERM)).start()\n"
         "run.train(evaluate=False)\n"
