@@ -44,9 +44,42 @@ def materials(bank, g, batch, size, index=None):
     ``index``), tinted."""
     idx = torch.randint(0, len(bank), (batch,), generator=g) if index is None else index
     maps = augment.random_geometry(bank.stored(idx), g, size, scale=SCALE)
-    maps = augment.jitter_colour(bank_mod.linearize(maps), g)
+    maps = tint(bank_mod.linearize(maps), g)
     maps["roughness"] = maps["roughness"].clamp(0.02, 1.0)
     return {k: maps[k].contiguous() for k in cv.MAP_NAMES}
+
+
+def tint(maps, g, hue=0.05, saturation=(0.8, 1.5), brightness=0.3):
+    """:func:`export.data.augment.jitter_colour`'s change of the diffuse (and of a coloured specular,
+    a metal's) as one 3x3 matrix per sample, 5x cheaper than going through HSV: a turn of ``hue`` of a
+    full turn at most about the grey axis, a saturation factor, a brightness factor; the diffuse kept
+    at most :data:`export.data.augment.MAX_ALBEDO`, the specular in [0, 1], a grey specular untouched."""
+    d = maps["diffuse"]
+    b = d.shape[0]
+
+    def draw(lo, hi):
+        return lo + torch.rand(b, generator=g) * (hi - lo)
+
+    angle = draw(-hue, hue) * 2 * math.pi
+    sat, gain = draw(*saturation), draw(1 - brightness, 1 + brightness)
+    k = torch.full((3,), 3 ** -0.5)
+    cross = torch.tensor([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    eye, outer = torch.eye(3), torch.outer(k, k)
+    c, s = angle.cos()[:, None, None], angle.sin()[:, None, None]
+    rotation = c * eye + s * cross + (1 - c) * outer           # Rodrigues, about (1, 1, 1)
+    grey = torch.full((3, 3), 1 / 3)
+    saturate = grey + sat[:, None, None] * (eye - grey)
+    m = gain[:, None, None] * saturate @ rotation               # (B, 3, 3)
+
+    def apply(x, top):
+        return torch.einsum("bij,bjhw->bihw", m.to(x), x).clamp(0.0, top)
+
+    out = dict(maps)
+    out["diffuse"] = apply(d, augment.MAX_ALBEDO)
+    spec = maps["specular"]
+    metal = (spec.amax(1, keepdim=True) - spec.amin(1, keepdim=True)) > 0.02
+    out["specular"] = torch.where(metal, apply(spec, 1.0), spec)
+    return out
 
 
 def auto_exposure(unit, target, stride=4, iterations=20):
@@ -65,7 +98,7 @@ def auto_exposure(unit, target, stride=4, iterations=20):
 
 def photograph(maps, capture, g):
     """The simulated photo of a batch (:func:`export.data.simulate.photograph`'s camera model, with
-    one render and auto exposure on a subsample): ``photo``, clean ``I``, ``intensity`` (B,)."""
+    one render and auto exposure on a subsample): ``photo``, the clean ``linear`` flash image, ``intensity`` (B,)."""
     d = maps["diffuse"]
     cam, light = capture["camera"].to(d), capture["light"].to(d)
     unit = render_maps(maps, light=light, camera=cam, intensity=1.0)
@@ -83,7 +116,7 @@ def photograph(maps, capture, g):
     x = x + (shot * x.clamp_min(0) + read * read).sqrt() * torch.randn(x.shape, generator=g, dtype=x.dtype)
     photo = simulate.tone_curve(x.clamp(0.0, 1.0), capture["tone"], capture["contrast"])
     photo = simulate.jpeg((photo * 255).round() / 255, capture["jpeg"])
-    return {"photo": photo, "I": cv.image_to_encoded(linear), "intensity": intensity}
+    return {"photo": photo, "linear": linear, "intensity": intensity}
 
 
 def _light_disc(camera, count, like):
@@ -184,8 +217,9 @@ def make(bank, g, batch, size=128, stage="maps", index=None):
            "context": flash.context(seen, seen, size), "base": flash.base(shot["photo"], seen, seen)}
     with torch.no_grad():
         if stage in ("masks", "joint"):
-            out["M_b"] = render_targets.bumpiness_mask(maps, light, intensity, image=shot["I"], camera=cam)
-            out["M_h"] = render_targets.highlight_mask(maps, light, intensity, image=shot["I"], camera=cam)
+            clean = cv.image_to_encoded(shot["linear"])
+            out["M_b"] = render_targets.bumpiness_mask(maps, light, intensity, image=clean, camera=cam)
+            out["M_h"] = render_targets.highlight_mask(maps, light, intensity, image=clean, camera=cam)
         if stage in ("aux", "joint"):
             out["I_bf"] = render_targets.bumpiness_flattened(maps, light, intensity, camera=cam)
             out["I_hr"], out["I_hr2"] = highlight_removed_fast(maps, cam, intensity)

@@ -3,7 +3,8 @@
 For every stage of a tier: **data** samples/s (:func:`export.engine.batches.make` alone), **step**
 samples/s (the frozen earlier stages' forward passes, the stage's forward, backward and Adam on a
 ready batch) and **loop** samples/s (both, one after the other, as :meth:`export.engine.run.Run.train_step`
-does). All in one process on ``--threads`` threads; the last line is
+does; for the maps stage, with its share of self-supervised steps on real photos when
+``../shared/data/real`` is there). All in one process on ``--threads`` threads; the last line is
 ``samples/s=<the slowest stage's loop rate> size=<training size>``.
 
 ``--tier fast`` (or ``lite``) measures the same for a tier of the first training loop
@@ -22,7 +23,8 @@ import torch
 
 from export.engine import bank as bank_mod
 from export.engine import batches, nets
-from export.engine.run import RunConfig, stage_loss
+from export.engine import real as real_mod
+from export.engine.run import RunConfig, real_loss, stage_loss
 
 
 def _bank(log):
@@ -45,6 +47,17 @@ def _rate(fn, batch, repeats):
     return batch * repeats / (time.process_time() - t)
 
 
+def _real_photos(log):
+    """A few real training photos (:mod:`export.engine.real`), or None without the shared data."""
+    from export.files import shared_data
+
+    root = os.path.join(shared_data(), "real")
+    if not os.path.isdir(root):
+        log("no ../shared/data/real: the maps stage's loop is measured on synthetic batches only")
+        return None
+    return real_mod.RealPhotos(real_mod.split(root)[0][:16])
+
+
 def measure(tier="swift", size=None, batch=None, repeats=4, log=print):
     """[(stage, parameters, data/s, step/s, loop/s)] for every stage of ``tier``."""
     cfg = RunConfig(tier=tier)
@@ -56,7 +69,7 @@ def measure(tier="swift", size=None, batch=None, repeats=4, log=print):
     rows = []
     for stage in nets.STAGES:
         module = getattr(net, stage)
-        opt = torch.optim.Adam(module.parameters(), lr=cfg.lr, betas=(0.5, 0.9))
+        opt = torch.optim.Adam(module.parameters(), lr=cfg.lr, betas=(0.5, 0.9), fused=True)
         ready = batches.make(bank, g, batch, size, stage)
 
         def step(b=None):
@@ -69,6 +82,18 @@ def measure(tier="swift", size=None, batch=None, repeats=4, log=print):
         data = _rate(lambda: batches.make(bank, g, batch, size, stage), batch, repeats)
         stepped = _rate(step, batch, repeats)
         loop = _rate(lambda: step(batches.make(bank, g, batch, size, stage)), batch, repeats)
+        real = _real_photos(log) if stage == "maps" and cfg.real_fraction > 0 else None
+        if real:  # as training runs it: a share of the steps are real photos (no rendering of the data)
+            def real_step():
+                net.train()
+                loss = real_loss(net, real.batch(g, batch, size))
+                opt.zero_grad(set_to_none=True)
+                loss.backward()
+                opt.step()
+
+            real_rate = _rate(real_step, batch, repeats)
+            log(f"maps: real-photo steps {real_rate:.1f}/s, synthetic {loop:.1f}/s")
+            loop = 1.0 / ((1 - cfg.real_fraction) / loop + cfg.real_fraction / real_rate)
         params = sum(p.numel() for p in module.parameters())
         rows.append((stage, params, data, stepped, loop))
         log(f"{stage}: {params / 1e6:.2f} M parameters, data {data:.1f}/s, step {stepped:.1f}/s, loop {loop:.1f}/s")

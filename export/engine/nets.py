@@ -1,8 +1,8 @@
 """The ``swift`` chain: the paper's three stages as small UNets behind a space-to-depth stem.
 
-Each stage is a :class:`export.nets.unet.UNet` that works at half the image size: a pixel-unshuffle
-stem folds every 2x2 block of the input into channels, and a pixel-shuffle head unfolds the output
-(4x fewer positions for the convolutions; measured 4x faster per sample on one core).
+Each stage is a UNet that works at half the image size (:class:`S2DNet`): a stride-2 stem folds
+every 2x2 block of the input into channels, and a transposed head unfolds the output (4x fewer
+positions for the convolutions; measured 4x faster per sample on one core than at full size).
 
 * **masks**: photo (3) + flash context (4) -> ``M_b``, ``M_h`` (6), clipped to [0, 1].
 * **aux**: photo + masks + context -> ``I_bf``, ``I_hr``, ``I_hr2`` (9), each the photo plus a
@@ -24,7 +24,6 @@ from torch import nn
 
 from export.engine.flash import BASE_CHANNELS, CONTEXT_CHANNELS
 from export.nets.chain import refined_maps
-from export.nets.unet import UNet
 
 STAGES = ("masks", "aux", "maps")
 IN_CHANNELS = {"masks": 3 + CONTEXT_CHANNELS, "aux": 3 + 6 + CONTEXT_CHANNELS,
@@ -38,26 +37,56 @@ class Widths:
 
     masks: tuple = (16, 4)
     aux: tuple = (16, 4)
-    maps: tuple = (24, 4)
+    maps: tuple = (22, 4)
 
 
 TIERS = {"swift": Widths()}
 
 
+class _Block(nn.Sequential):
+    def __init__(self, cin, cout):
+        super().__init__(nn.Conv2d(cin, cout, 3, padding=1), nn.LeakyReLU(0.2, inplace=True),
+                         nn.Conv2d(cout, cout, 3, padding=1), nn.LeakyReLU(0.2, inplace=True))
+
+
 class S2DNet(nn.Module):
-    """A UNet at half resolution between a pixel-unshuffle stem and a pixel-shuffle head."""
+    """A UNet at half resolution: a 2x2 stride-2 convolution stem (a pixel-unshuffle and a 1x1
+    convolution in one), ``depth`` levels down by stride-2 3x3 convolutions (widths ``base * 2**i``,
+    at most 8x), back up by nearest-neighbour doubling, concatenation with the skip and two 3x3
+    convolutions, and a 2x2 stride-2 transposed-convolution head (a 1x1 convolution and a
+    pixel-shuffle in one). LeakyReLU(0.2), no normalisation. Measured on one core under bf16, against
+    a pixel-unshuffle around :class:`export.nets.unet.UNet` (max-pool, bilinear): 1.25x faster to train
+    at base 24, 1.3x faster to run."""
 
     def __init__(self, in_channels, out_channels, base, depth, zero_head=False):
         super().__init__()
+        w = [base * min(2 ** i, 8) for i in range(depth + 1)]
         self.out_channels = out_channels
-        self.unet = UNet(in_channels * 4, out_channels * 4, base=base, depth=depth, out_activation=None)
+        self.stem = nn.Sequential(nn.Conv2d(in_channels, w[0], 2, stride=2), nn.LeakyReLU(0.2, inplace=True),
+                                  _Block(w[0], w[0]))
+        self.down = nn.ModuleList(
+            nn.Sequential(nn.Conv2d(w[i], w[i + 1], 3, stride=2, padding=1), nn.LeakyReLU(0.2, inplace=True),
+                          _Block(w[i + 1], w[i + 1])) for i in range(depth))
+        self.up = nn.ModuleList(_Block(w[i + 1] + w[i], w[i]) for i in reversed(range(depth)))
+        self.head = nn.ConvTranspose2d(w[0], out_channels, 2, stride=2)
+        for m in self.modules():
+            if isinstance(m, nn.Conv2d):
+                nn.init.kaiming_normal_(m.weight, a=0.2, nonlinearity="leaky_relu")
+                nn.init.zeros_(m.bias)
         if zero_head:
-            nn.init.zeros_(self.unet.decoder.head.weight)
-            nn.init.zeros_(self.unet.decoder.head.bias)
+            nn.init.zeros_(self.head.weight)
+            nn.init.zeros_(self.head.bias)
 
     def forward(self, x):
-        x = F.pixel_unshuffle(x, 2).contiguous(memory_format=torch.channels_last)
-        return F.pixel_shuffle(self.unet(x), 2).contiguous()
+        x = self.stem(x.contiguous(memory_format=torch.channels_last))
+        skips = [x]
+        for down in self.down:
+            x = down(x)
+            skips.append(x)
+        skips.pop()
+        for up in self.up:
+            x = up(torch.cat([F.interpolate(x, scale_factor=2.0, mode="nearest"), skips.pop()], 1))
+        return self.head(x).contiguous()
 
 
 def _c(x):

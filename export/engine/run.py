@@ -155,7 +155,7 @@ class Run:
         if self.stage is None:
             return None
         module = getattr(self.net, self.stage)
-        return torch.optim.Adam(module.parameters(), lr=self.config.lr, betas=(0.5, 0.9))
+        return torch.optim.Adam(module.parameters(), lr=self.config.lr, betas=(0.5, 0.9), fused=True)
 
     def state(self):
         return {"model": self.net.state_dict(), "optimizer": self.optimizer.state_dict() if self.optimizer else None,
