@@ -404,9 +404,13 @@ def load_trained(out, tier=None, device="cpu", stages=STAGES):
 
 
 @click.command()
+@click.option("--benchmark", is_flag=True,
+              help="Measure data, step and whole-loop samples/s of every stage of the tier (default swift, the "
+                   "fast engine's chain, export.engine) and stop; the last line is samples/s=<slowest> size=<size>.")
 @click.option("--stage", type=click.Choice(STAGES + ("all",)), default="all", show_default=True)
-@click.option("--tier", type=click.Choice(ALL_TIERS), default="fast", show_default=True,
-              help="lite: one small end-to-end UNet; fast, balanced, best: the chain at three widths.")
+@click.option("--tier", type=click.Choice(ALL_TIERS + ("swift",)), default=None,
+              help="lite: one small end-to-end UNet; fast, balanced, best: the chain at three widths (default "
+                   "fast); swift: the fast engine's chain (--benchmark only; train it with python -m export.engine).")
 @click.option("--out", type=click.Path(file_okay=False), default=None, help="Run folder (default runs/<tier>).")
 @click.option("--steps", type=int, default=None, help="Steps per stage (split for --stage all). On a resumed run, its new total: more to extend it, its current step to end it there (validation and provenance written).")
 @click.option("--minutes", type=float, default=None, help="Time budget instead of --steps (split for --stage all).")
@@ -432,9 +436,17 @@ def load_trained(out, tier=None, device="cpu", stages=STAGES):
 @click.option("--albedo-level", type=click.Choice(ALBEDO_LEVELS), default="convention", show_default=True,
               help="The maps stage's diffuse targets: at the conventions' flash power, as the photo and the physical "
                    "estimate read them, or the material's true albedo (runs before session 12). F0: the material's.")
-def cli(stage, tier, out, steps, minutes, batch, size, device, seed, threads, fresh, init_from, no_adversarial,
-        checkpoint_every, val_every, shared, refine, variant, albedo_level):
+def cli(benchmark, stage, tier, out, steps, minutes, batch, size, device, seed, threads, fresh, init_from,
+        no_adversarial, checkpoint_every, val_every, shared, refine, variant, albedo_level):
     """Train the model stage by stage."""
+    if benchmark:
+        from export.engine import benchmark as engine_benchmark
+
+        engine_benchmark.main(tier or "swift", threads or 1, log=click.echo)
+        return
+    tier = tier or "fast"
+    if tier == "swift":
+        raise click.BadParameter("train swift with python -m export.engine train", param_hint="--tier")
     if threads:
         torch.set_num_threads(threads)
     if size % 32:

@@ -214,3 +214,90 @@ def load_seeds(root, size=512):
     if not names:
         return [], {}
     return names, {k: np.stack(v) for k, v in stacks.items()}
+
+
+def _manifest_signs(base):
+    """Material name -> +1 (OpenGL) / -1 (DirectX) from ``cc0_more/MANIFEST.md``'s per-material table
+    (the measured convention where it gives one, else the stated one); absent names: unknown."""
+    signs = {}
+    path = os.path.join(base, "MANIFEST.md")
+    if not os.path.isfile(path):
+        return signs
+    with open(path, encoding="utf-8") as f:
+        for line in f:
+            cells = [c.strip() for c in line.split("|")]
+            if len(cells) < 8 or "/" not in cells[1] or not cells[1].startswith("`"):
+                continue
+            name = cells[1].strip("`").split("/")[-1]
+            text = cells[6] or cells[5]
+            if "OpenGL" in text:
+                signs[name] = 1
+            elif "DirectX" in text:
+                signs[name] = -1
+    return signs
+
+
+def load_cc0_more(folder, size=None, depth=DEFAULT_DEPTH, default_sign=-1):
+    """Load one ``materials/cc0_more/<source>/<Material>/`` set (``color``, ``roughness``, optional
+    ``normal``, ``height``, ``metalness``; .jpg or .png) as linear maps, like :func:`load_ambientcg`.
+
+    The normal map's +Y convention is measured against the height map where there is one, else
+    ``default_sign`` (the manifest's); sets without a normal map get normals from their height.
+    """
+    def get(name, grey=False):
+        for ext in (".jpg", ".png"):
+            p = os.path.join(folder, name + ext)
+            if os.path.isfile(p):
+                img = read_image(p)
+                if img.shape[0] != img.shape[1]:  # 1024x512 sets: the square of the shorter side
+                    s = min(img.shape[:2])
+                    img = img[:s, :s]
+                img = img[..., :1] if grey else img[..., :3]
+                if not grey and img.shape[-1] == 1:
+                    img = np.repeat(img, 3, -1)
+                return _resize(img, size) if size else img
+        return None
+
+    colour, rough = get("color"), get("roughness", grey=True)
+    if colour is None or rough is None:
+        raise FileNotFoundError(f"{folder}: needs color and roughness")
+    metal = get("metalness", grey=True)
+    metal = np.zeros_like(rough) if metal is None else metal
+    diffuse, specular = metalness_to_specular(cv.srgb_to_linear(colour), metal)
+    height, nmap = get("height", grey=True), get("normal")
+    if nmap is not None:
+        normal, source = _oriented_normals(nmap, height, default_sign, "manifest")
+    elif height is not None:
+        normal, source = normals_from_height(height, depth=depth), "height"
+    else:
+        raise FileNotFoundError(f"{folder}: needs normal or height")
+    return {"normal": normal.astype(np.float32), "diffuse": diffuse.astype(np.float32),
+            "roughness": rough.astype(np.float32), "specular": specular.astype(np.float32),
+            "normal_source": source}
+
+
+#: ``cc0_more`` sets that are not a flat material under a flash: glowing cracks, a building front.
+NOT_MATERIALS = ("Lava002", "Facade005")
+
+
+def all_folders(shared=None):
+    """(loader, folder) for every CC0/MIT set with full maps under ``<shared>/materials``: ambientCG,
+    PlayCanvas and ``cc0_more`` (but :data:`NOT_MATERIALS`); empty when absent."""
+    import functools
+
+    from export.files import shared_data
+
+    root = shared_data(shared)
+    out = seed_folders(root)
+    base = os.path.join(root, "materials", "cc0_more")
+    if os.path.isdir(base):
+        signs = _manifest_signs(base)
+        for src in sorted(os.listdir(base)):
+            d = os.path.join(base, src)
+            if not os.path.isdir(d):
+                continue
+            for name in sorted(os.listdir(d)):
+                if os.path.isdir(os.path.join(d, name)) and name not in NOT_MATERIALS:
+                    loader = functools.partial(load_cc0_more, default_sign=signs.get(name, -1))
+                    out.append((loader, os.path.join(d, name)))
+    return out

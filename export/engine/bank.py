@@ -1,0 +1,240 @@
+"""The material bank: materials made once, stored on disk, reused by every run.
+
+A bank is a folder of shards (``shard_00000.npz`` …) and ``manifest.json``. Each shard holds
+``SHARD`` materials at ``SIZE``² as
+
+* ``diffuse``, ``specular``: (N, S, S, 3) uint8, linear albedo stored with the albedo gamma
+  (:func:`svbrdf_cli.conventions.encode_maps`' encoding);
+* ``roughness``: (N, S, S) uint8, linear;
+* ``normal``: (N, S, S, 2) int16, the unit normal's x and y (+Y up) times 32767; z is rebuilt;
+
+and the manifest lists every shard with its materials' sources (``procedural:<family>``,
+``cc0:<set>``, ``mix:<a>+<b>``). Three kinds of material:
+
+* **procedural**: :func:`export.data.procedural.random_materials` (every family, 8 % metals);
+* **cc0**: random crops (zoom, rotation, flip) of every CC0 set under ``../shared/data/materials``
+  (:func:`export.data.cc0.load_all`), several per set;
+* **mix**: two bank materials blended through a smooth random mask.
+
+``python -m export.engine bank --count 8000`` grows the bank to at least that many materials
+(appending shards, so an interrupted build keeps what it made); a training run grows it to its
+``--bank-count`` before it starts. Training loads every shard into memory (:class:`Bank`).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+
+import numpy as np
+import torch
+
+from export.data import augment, procedural
+from svbrdf_cli import conventions as cv
+
+SIZE = 256
+SHARD = 64
+VERSION = 1
+#: Mix of kinds in a grown bank (the rest procedural).
+CC0_FRACTION = 0.25
+MIX_FRACTION = 0.2
+#: A CC0 shard holds this many crops of each of its sets.
+CC0_CROPS = 8
+#: Mixes blend two materials of the first this many shards (a fixed set: a bank grown in several
+#: sittings is the bank grown at once).
+MIX_SOURCE_SHARDS = 32
+#: Probability that a procedural material is a metal (real captures: about 12 % metals, with the CC0 sets).
+METAL_FRACTION = 0.08
+
+
+def default_root():
+    """``$SVBRDF_BANK`` or ``~/.cache/svbrdf/bank``: the bank is rebuilt when absent, never committed."""
+    return os.environ.get("SVBRDF_BANK") or os.path.join(os.path.expanduser("~"), ".cache", "svbrdf", "bank")
+
+
+def encode(maps):
+    """Linear float maps (B, C, S, S) -> dict of the shard's numpy arrays (see the module docstring)."""
+    def u8(x):
+        return (x.clamp(0, 1) * 255).round().to(torch.uint8).permute(0, 2, 3, 1).numpy()
+
+    n = cv.normalize(maps["normal"], axis=1)
+    return {
+        "diffuse": u8(maps["diffuse"].clamp(0, 1) ** (1 / cv.ALBEDO_GAMMA)),
+        "specular": u8(maps["specular"].clamp(0, 1) ** (1 / cv.ALBEDO_GAMMA)),
+        "roughness": u8(maps["roughness"])[..., 0],
+        "normal": (n[:, :2] * 32767).round().clamp(-32767, 32767).to(torch.int16).permute(0, 2, 3, 1).numpy(),
+    }
+
+
+def decode_stored(arrays, dtype=torch.float32):
+    """The shard arrays (numpy or torch, any leading batch) -> maps (B, C, S, S) with diffuse and
+    specular still in the stored encoding (resample these, then :func:`linearize`: 4x fewer powers)."""
+    def t(x):
+        return torch.as_tensor(x)
+
+    xy = t(arrays["normal"]).permute(0, 3, 1, 2).to(dtype) / 32767
+    z = (1 - (xy * xy).sum(1, keepdim=True)).clamp_min(1e-6).sqrt()
+    return {"normal": torch.cat([xy, z], 1),
+            "diffuse": t(arrays["diffuse"]).permute(0, 3, 1, 2).to(dtype) / 255,
+            "roughness": t(arrays["roughness"]).unsqueeze(1).to(dtype) / 255,
+            "specular": t(arrays["specular"]).permute(0, 3, 1, 2).to(dtype) / 255}
+
+
+def linearize(maps):
+    """:func:`decode_stored`'s maps (resampled or not) -> linear maps, unit normals."""
+    return {"normal": cv.normalize(maps["normal"], axis=1), "diffuse": maps["diffuse"] ** cv.ALBEDO_GAMMA,
+            "roughness": maps["roughness"], "specular": maps["specular"] ** cv.ALBEDO_GAMMA}
+
+
+def decode(arrays, dtype=torch.float32):
+    """The shard arrays (numpy or torch, any leading batch) -> linear maps (B, C, S, S)."""
+    return linearize(decode_stored(arrays, dtype))
+
+
+def read_manifest(root):
+    path = os.path.join(root, "manifest.json")
+    if not os.path.isfile(path):
+        return {"version": VERSION, "size": SIZE, "shards": []}
+    with open(path) as f:
+        m = json.load(f)
+    if m.get("version") != VERSION or m.get("size") != SIZE:
+        raise ValueError(f"{root}: a bank of another version or size; move it away or set SVBRDF_BANK")
+    return m
+
+
+def _write_manifest(root, manifest):
+    tmp = os.path.join(root, "manifest.json.tmp")
+    with open(tmp, "w") as f:
+        json.dump(manifest, f, indent=1)
+    os.replace(tmp, os.path.join(root, "manifest.json"))
+
+
+def count(root):
+    """Materials the bank at ``root`` holds (0 when absent)."""
+    return sum(s["count"] for s in read_manifest(root)["shards"])
+
+
+def _procedural(g, n):
+    m = procedural.random_materials(g, n, SIZE, device="cpu", metal_fraction=METAL_FRACTION)
+    return {k: m[k] for k in cv.MAP_NAMES}, [f"procedural:{f}" for f in m["family"]]
+
+
+class _Cc0Source:
+    """Random crops of the CC0 sets, one set in memory at a time."""
+
+    def __init__(self, shared):
+        from export.data import cc0
+
+        self.folders = cc0.all_folders(shared)
+        self.cc0 = cc0
+
+    def __bool__(self):
+        return bool(self.folders)
+
+    def draw(self, g, n, per_set=CC0_CROPS):
+        """``n`` crops, ``per_set`` from each of ``n / per_set`` random sets (None: no set loads)."""
+        parts, names = [], []
+        while len(names) < n:
+            loader, folder = self.folders[int(torch.randint(0, len(self.folders), (1,), generator=g))]
+            try:
+                m = loader(folder, size=1024)
+            except (FileNotFoundError, ValueError):
+                continue
+            k = min(per_set, n - len(names))
+            maps = {key: torch.from_numpy(np.ascontiguousarray(np.moveaxis(m[key], -1, 0)))[None]
+                    .expand(k, -1, -1, -1).contiguous() for key in cv.MAP_NAMES}
+            parts.append(augment.random_geometry(maps, g, SIZE, scale=(0.25, 1.0)))
+            names += [f"cc0:{os.path.basename(folder)}"] * k
+        return {key: torch.cat([p[key] for p in parts]) for key in cv.MAP_NAMES}, names
+
+
+def _blend_masks(g, n):
+    from export.data.dataset import _blend_mask
+
+    return _blend_mask(g, n, SIZE, "cpu", torch.float32)
+
+
+def grow(root=None, target=8000, seed=0, shared=None, progress=print):
+    """Append shards until the bank holds at least ``target`` materials; returns the count.
+
+    Every shard draws from a generator seeded with (``seed``, shard index), so a bank grown in
+    several sittings is the bank grown at once.
+    """
+    root = root or default_root()
+    os.makedirs(root, exist_ok=True)
+    manifest = read_manifest(root)
+    have = sum(s["count"] for s in manifest["shards"])
+    cc0_source = None
+    mix_bank = None
+    t0 = time.time()
+    while have < target:
+        index = len(manifest["shards"])
+        g = torch.Generator().manual_seed(seed * 1_000_003 + index)
+        u = float(torch.rand(1, generator=g))
+        kind = "procedural"
+        if u < CC0_FRACTION:
+            if cc0_source is None:
+                cc0_source = _Cc0Source(shared)
+            kind = "cc0" if cc0_source else "procedural"
+        elif u < CC0_FRACTION + MIX_FRACTION and index >= MIX_SOURCE_SHARDS:
+            kind = "mix"
+        drawn = None
+        if kind == "cc0":
+            drawn = cc0_source.draw(g, SHARD)
+        elif kind == "mix":
+            mix_bank = mix_bank or Bank(root, limit_shards=MIX_SOURCE_SHARDS)
+            a, b = mix_bank.draw_whole(g, SHARD), mix_bank.draw_whole(g, SHARD)
+            maps = augment.blend(a[0], b[0], _blend_masks(g, SHARD))
+            maps["normal"] = cv.normalize(maps["normal"], axis=1)
+            drawn = ({k: maps[k] for k in cv.MAP_NAMES}, [f"mix:{x}+{y}" for x, y in zip(a[1], b[1])])
+        if drawn is None:
+            kind = "procedural"
+            drawn = _procedural(g, SHARD)
+        maps, sources = drawn
+        name = f"shard_{index:05d}.npz"
+        tmp = os.path.join(root, name + ".tmp.npz")
+        np.savez(tmp, **encode(maps))
+        os.replace(tmp, os.path.join(root, name))
+        manifest["shards"].append({"file": name, "count": SHARD, "kind": kind, "sources": sources})
+        _write_manifest(root, manifest)
+        have += SHARD
+        if progress:
+            progress(f"bank: {have} materials ({kind} shard {index}, {time.time() - t0:.0f} s)")
+    return have
+
+
+class Bank:
+    """Every shard of a bank in memory as uint8/int16 tensors (about 11 bytes a pixel)."""
+
+    def __init__(self, root=None, limit_shards=None):
+        root = root or default_root()
+        manifest = read_manifest(root)
+        shards = manifest["shards"][:limit_shards] if limit_shards is not None else manifest["shards"]
+        if not shards:
+            raise FileNotFoundError(f"{root}: the material bank is empty; grow it with "
+                                    "`python -m export.engine bank --count 8000`")
+        parts = {k: [] for k in ("diffuse", "specular", "roughness", "normal")}
+        self.sources = []
+        for s in shards:
+            with np.load(os.path.join(root, s["file"])) as z:
+                for k in parts:
+                    parts[k].append(torch.from_numpy(z[k]))
+            self.sources += s["sources"]
+        self.arrays = {k: torch.cat(v) for k, v in parts.items()}
+        self.root = root
+
+    def __len__(self):
+        return len(self.sources)
+
+    def maps(self, index, dtype=torch.float32):
+        """Linear maps (B, C, S, S) of the materials at ``index`` (a (B,) tensor)."""
+        return decode({k: v[index] for k, v in self.arrays.items()}, dtype)
+
+    def stored(self, index, dtype=torch.float32):
+        """:func:`decode_stored` maps of the materials at ``index``."""
+        return decode_stored({k: v[index] for k, v in self.arrays.items()}, dtype)
+
+    def draw_whole(self, g, n):
+        idx = torch.randint(0, len(self), (n,), generator=g)
+        return self.maps(idx), [self.sources[i] for i in idx.tolist()]

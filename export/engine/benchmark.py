@@ -1,0 +1,157 @@
+"""Training speed of each stage, measured as training runs it (``python -m export.train --benchmark``).
+
+For every stage of a tier: **data** samples/s (:func:`export.engine.batches.make` alone), **step**
+samples/s (the frozen earlier stages' forward passes, the stage's forward, backward and Adam on a
+ready batch) and **loop** samples/s (both, one after the other, as :meth:`export.engine.run.Run.train_step`
+does; for the maps stage, with its share of self-supervised steps on real photos when
+``../shared/data/real`` is there). All in one process on ``--threads`` threads; the last line is
+``samples/s=<the slowest stage's loop rate> size=<training size>``.
+
+``--tier fast`` (or ``lite``) measures the same for a tier of the first training loop
+(:mod:`export.train`, :func:`measure_old`): the baseline.
+
+Without a material bank it grows a small one in a temporary folder (two shards; a few seconds).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+
+import torch
+
+from export.engine import bank as bank_mod
+from export.engine import batches, nets
+from export.engine import real as real_mod
+from export.engine.run import RunConfig, real_loss, stage_loss
+
+
+def _bank(log):
+    root = bank_mod.default_root()
+    if bank_mod.count(root) >= 2 * bank_mod.SHARD:
+        return bank_mod.Bank(root)
+    tmp = tempfile.mkdtemp(prefix="svbrdf-bank-")
+    log(f"no material bank at {root}: a small one in {tmp}")
+    bank_mod.grow(tmp, 2 * bank_mod.SHARD, progress=None)
+    return bank_mod.Bank(tmp)
+
+
+def _rate(fn, batch, repeats):
+    """Samples per second of this process's CPU time (on one thread, its wall time when nothing else
+    runs; on a shared machine, what one core of its own would give)."""
+    fn()  # warm-up
+    t = time.process_time()
+    for _ in range(repeats):
+        fn()
+    return batch * repeats / (time.process_time() - t)
+
+
+def _real_photos(log):
+    """A few real training photos (:mod:`export.engine.real`), or None without the shared data."""
+    from export.files import shared_data
+
+    root = os.path.join(shared_data(), "real")
+    if not os.path.isdir(root):
+        log("no ../shared/data/real: the maps stage's loop is measured on synthetic batches only")
+        return None
+    return real_mod.RealPhotos(real_mod.split(root)[0][:16])
+
+
+def measure(tier="swift", size=None, batch=None, repeats=4, log=print):
+    """[(stage, parameters, data/s, step/s, loop/s)] for every stage of ``tier``."""
+    cfg = RunConfig(tier=tier)
+    size, batch = size or cfg.size, batch or cfg.batch
+    bank = _bank(log)
+    net = nets.build(tier)
+    net.loss_weights = dict(cfg.weights)
+    g = torch.Generator().manual_seed(0)
+    rows = []
+    for stage in nets.STAGES:
+        module = getattr(net, stage)
+        opt = torch.optim.Adam(module.parameters(), lr=cfg.lr, betas=(0.5, 0.9), fused=True)
+        ready = batches.make(bank, g, batch, size, stage)
+
+        def step(b=None):
+            net.train()
+            loss = stage_loss(net, stage, b if b is not None else ready)
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+
+        data = _rate(lambda: batches.make(bank, g, batch, size, stage), batch, repeats)
+        stepped = _rate(step, batch, repeats)
+        loop = _rate(lambda: step(batches.make(bank, g, batch, size, stage)), batch, repeats)
+        real = _real_photos(log) if stage == "maps" and cfg.real_fraction > 0 else None
+        if real:  # as training runs it: a share of the steps are real photos (no rendering of the data)
+            def real_step():
+                net.train()
+                loss = real_loss(net, real.batch(g, batch, size))
+                opt.zero_grad(set_to_none=True)
+                loss.backward()
+                opt.step()
+
+            real_rate = _rate(real_step, batch, repeats)
+            log(f"maps: real-photo steps {real_rate:.1f}/s, synthetic {loop:.1f}/s")
+            loop = 1.0 / ((1 - cfg.real_fraction) / loop + cfg.real_fraction / real_rate)
+        params = sum(p.numel() for p in module.parameters())
+        rows.append((stage, params, data, stepped, loop))
+        log(f"{stage}: {params / 1e6:.2f} M parameters, data {data:.1f}/s, step {stepped:.1f}/s, loop {loop:.1f}/s")
+    return rows, size
+
+
+def measure_old(tier="fast", size=128, batch=16, repeats=2, log=print):
+    """The same rows for a tier of the first training loop (:mod:`export.train`: samples made from
+    scratch by :func:`export.data.dataset.make_batch`, the numpy physical estimate per sample, fp32),
+    on a throw-away run folder; the baseline the engine is measured against."""
+    import contextlib
+    import io
+
+    from export import train as old
+
+    rows = []
+    with tempfile.TemporaryDirectory() as out:
+        cfg = old.RunConfig(tier=tier, size=size, batch=batch)
+        for stage in old.VARIANTS[old.tier_variant(tier)]:
+            with contextlib.redirect_stdout(io.StringIO()):
+                t = old.StageTrainer(stage, out, cfg)
+            ready = t.batch()
+
+            def step(b=None):
+                t.net.eval()
+                t.net.stage(stage).train()
+                t.opt.zero_grad()
+                total, _, _ = t.losses(b if b is not None else ready)
+                total.backward()
+                t.opt.step()
+
+            data = _rate(t.batch, batch, repeats)
+            stepped = _rate(step, batch, repeats)
+            loop = _rate(t.train_step, batch, repeats)
+            params = sum(p.numel() for p in t.net.stage(stage).parameters())
+            rows.append((stage, params, data, stepped, loop))
+            log(f"{stage}: data {data:.1f}/s, step {stepped:.1f}/s, loop {loop:.1f}/s")
+            t.save()  # the next stage loads this one, frozen
+    return rows, size
+
+
+def table(rows, size, threads):
+    lines = [f"| stage ({size}², {threads} thread{'s' if threads != 1 else ''}) | parameters | data samples/s "
+             "| step samples/s | loop samples/s |", "|---|---|---|---|---|"]
+    lines += [f"| {s} | {p / 1e6:.2f} M | {d:.1f} | {st:.1f} | {lo:.1f} |" for s, p, d, st, lo in rows]
+    return "\n".join(lines)
+
+
+def main(tier="swift", threads=1, log=print):
+    torch.set_num_threads(threads)
+    if tier == "swift":
+        rows, size = measure(tier, log=lambda m: None)
+    else:
+        rows, size = measure_old(tier, log=lambda m: None)
+    log(table(rows, size, threads))
+    log(f"samples/s={min(r[4] for r in rows):.1f} size={size}")
+    return rows
+
+
+if __name__ == "__main__":
+    main(threads=int(os.environ.get("THREADS", "1")))

@@ -1,0 +1,144 @@
+"""Commands of the training engine.
+
+    python -m export.engine bank --count 8000          # grow the material bank (reused by every run)
+    python -m export.engine train --run runs/swift     # train, or resume the run in that folder
+    python -m export.engine background --run runs/swift  # the same, detached, on one core
+    python -m export.engine stop --run runs/swift      # SIGTERM: save and exit 0
+"""
+
+from __future__ import annotations
+
+import click
+
+from export.engine import bank as bank_mod
+
+
+@click.group()
+def main():
+    """The fast training engine (see docs/training.md)."""
+
+
+@main.command()
+@click.option("--count", default=8000, show_default=True, help="Grow the bank to at least this many materials.")
+@click.option("--root", default=None, help="Bank folder (default $SVBRDF_BANK or ~/.cache/svbrdf/bank).")
+@click.option("--threads", default=1, show_default=True)
+def bank(count, root, threads):
+    """Grow the material bank."""
+    import torch
+
+    torch.set_num_threads(threads)
+    n = bank_mod.grow(root, count)
+    click.echo(f"bank: {n} materials in {root or bank_mod.default_root()}")
+
+
+def _setup(threads):
+    import torch
+
+    torch.set_num_threads(threads)
+    torch.set_num_interop_threads(1)
+
+
+@main.command()
+@click.option("--run", "folder", default="runs/swift", show_default=True, help="Run folder (resumed when it holds a state).")
+@click.option("--threads", default=1, show_default=True)
+@click.option("--steps", type=int, default=None, help="Stop after this many more steps.")
+@click.option("--minutes", type=float, default=None, help="Stop after this many minutes.")
+@click.option("--checkpoint-minutes", type=float, default=None, help="Save every this many minutes (default 10).")
+@click.option("--eval-minutes", type=float, default=None, help="Evaluate every this many minutes (default 30).")
+def train(folder, threads, steps, minutes, checkpoint_minutes, eval_minutes):
+    """Train the swift chain in FOLDER, or resume it; SIGTERM/SIGINT save and exit 0."""
+    import dataclasses
+
+    from export.engine.run import Run
+
+    _setup(threads)
+    run = Run(folder, log=lambda m: click.echo(m, err=True))
+    changes = {k: v for k, v in (("checkpoint_minutes", checkpoint_minutes), ("eval_minutes", eval_minutes))
+               if v is not None}
+    if changes:
+        run.config = dataclasses.replace(run.config, **changes)
+    click.echo(f"run {folder}: step {run.step}, stage {run.stage}, {run.samples} samples, "
+               f"{run.cpu / 3600:.2f} CPU h", err=True)
+    run.train(steps=steps, minutes=minutes)
+    click.echo(f"run {folder}: saved at step {run.step} ({run.samples} samples)", err=True)
+
+
+@main.command()
+@click.option("--run", "folder", default="runs/swift", show_default=True)
+def background(folder):
+    """Resume (or start) the run in FOLDER detached, on one core; its log is FOLDER/log.txt."""
+    import os
+    import subprocess
+    import sys
+
+    os.makedirs(folder, exist_ok=True)
+    pid_file = os.path.join(folder, "pid")
+    if os.path.isfile(pid_file):
+        try:
+            pid = int(open(pid_file).read())
+            os.kill(pid, 0)
+            raise click.ClickException(f"{folder}: already running as pid {pid}")
+        except (ValueError, ProcessLookupError):
+            pass
+    env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    with open(os.path.join(folder, "log.txt"), "a") as log:
+        p = subprocess.Popen([sys.executable, "-m", "export.engine", "train", "--run", folder, "--threads", "1"],
+                             stdout=log, stderr=log, stdin=subprocess.DEVNULL, start_new_session=True, env=env)
+    with open(pid_file, "w") as f:
+        f.write(str(p.pid))
+    click.echo(f"training {folder} in the background as pid {p.pid}; log: {folder}/log.txt")
+
+
+@main.command()
+@click.option("--run", "folder", default="runs/swift", show_default=True)
+def stop(folder):
+    """Ask the background run in FOLDER to save and stop (SIGTERM), and wait for it."""
+    import os
+    import signal
+    import time
+
+    pid_file = os.path.join(folder, "pid")
+    try:
+        pid = int(open(pid_file).read())
+        os.kill(pid, signal.SIGTERM)
+    except (OSError, ValueError):
+        raise click.ClickException(f"{folder}: no background run")
+    while True:
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            break
+        time.sleep(1)
+    os.remove(pid_file)
+    click.echo(f"{folder}: stopped and saved")
+
+
+@main.command()
+@click.option("--out", default="docs/figures/bank.png", show_default=True)
+@click.option("--seed", default=0, show_default=True)
+def figure(out, seed):
+    """Draw 64 random bank materials (photo and maps) to OUT."""
+    import cv2
+
+    from export.engine.figure import bank_figure
+
+    _setup(1)
+    sheet = bank_figure(bank_mod.Bank(), seed=seed)
+    cv2.imwrite(out, sheet[..., ::-1])
+    click.echo(f"{out}: {sheet.shape[1]}x{sheet.shape[0]}")
+
+
+@main.command()
+@click.option("--run", "folder", default="runs/swift", show_default=True)
+@click.option("--out", default="docs/figures/learning_curve.png", show_default=True)
+def curve(folder, out):
+    """Plot FOLDER/curve.jsonl to OUT."""
+    import os
+
+    from export.engine import curve as curve_mod
+
+    path = os.path.join(folder, "curve.jsonl")
+    if not os.path.isfile(path):
+        raise click.ClickException(f"{path}: no evaluations yet")
+    curve_mod.plot(curve_mod.read(path), out)
+    click.echo(out)

@@ -1,0 +1,352 @@
+"""Training runs of the ``swift`` chain: stage by stage, checkpointed, resumable exactly.
+
+A run is a folder:
+
+* ``state.pt``: every stage's weights, the optimiser of the stage in training, the step, the
+  samples seen, the CPU seconds spent, the data generator's state and the run's configuration;
+  written every ``checkpoint_minutes`` of wall time and when the process gets SIGTERM or SIGINT
+  (it finishes the step, saves, and exits 0);
+* ``curve.jsonl``: one line per evaluation (samples seen, CPU hours, stage, the running training
+  loss, the generated validation loss of the stage, and Des19 scores of the whole chain);
+* ``log.txt`` when started with ``python -m export.engine background``.
+
+Stages train in the order of ``schedule`` (the paper's: masks, then aux with the masks frozen,
+then maps with both frozen); each gets a sample budget, and a fresh Adam (betas 0.5, 0.9, lr 2e-4
+halved every ``halve_every`` samples of the stage). Forward passes run under bf16 autocast with
+channels-last tensors; losses and the renderer stay in fp32.
+
+Resuming restores everything a step depends on, so a run stopped at step n and resumed is the
+run that never stopped (``tests/export/test_engine.py``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import signal
+import time
+
+import numpy as np
+import torch
+
+from export.engine import bank as bank_mod
+from export.engine import batches, flash, nets
+from export.engine import real as real_mod
+from export.files import atomic_torch_save
+from svbrdf_cli import conventions as cv
+
+AUX_NAMES = ("I_bf", "I_hr", "I_hr2")
+
+
+@dataclasses.dataclass
+class RunConfig:
+    tier: str = "swift"
+    size: int = 128
+    batch: int = 16
+    seed: int = 0
+    #: (stage, samples) in order; a stage ends when it has seen its samples.
+    schedule: tuple = (("masks", 300_000), ("aux", 400_000), ("maps", 3_000_000))
+    lr: float = 2e-4
+    halve_every: int = 960_000
+    checkpoint_minutes: float = 10.0
+    eval_minutes: float = 30.0
+    val_samples: int = 64
+    bank_count: int = 8000
+    bank_root: str | None = None
+    #: Share of the maps stage's steps that are self-supervised batches of real photos
+    #: (:mod:`export.engine.real`), and the weight of their rendering loss.
+    real_fraction: float = 0.25
+    real_weight: float = 1.0
+    real_root: str | None = None
+    #: Maps loss weights (stored encodings, L1).
+    weights: tuple = (("normal", 2.0), ("diffuse", 1.0), ("roughness", 1.0), ("specular", 1.0))
+
+
+def _config_from(d):
+    d = dict(d)
+    d["schedule"] = tuple(tuple(x) for x in d["schedule"])
+    d["weights"] = tuple(tuple(x) for x in d["weights"])
+    return RunConfig(**d)
+
+
+def stage_loss(net, stage, b):
+    """The loss of ``stage`` on batch ``b`` (earlier stages frozen, under no_grad)."""
+    photo, context = b["photo"], b["context"]
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        if stage == "masks":
+            pred = net.run_masks(photo, context)
+            return ((pred - torch.cat([b["M_b"], b["M_h"]], 1)) ** 2).mean()
+        with torch.no_grad():
+            masks = net.run_masks(photo, context).clamp(0, 1)
+        if stage == "aux":
+            pred = net.run_aux(photo, masks, context)
+            return (pred - torch.cat([b[k] for k in AUX_NAMES], 1)).abs().mean()
+        with torch.no_grad():
+            aux = net.run_aux(photo, masks, context).clamp(0, 1)
+        pred = net.run_maps(photo, masks, aux, b["base"], context)
+    return maps_loss(pred, b, net_weights(net))
+
+
+def real_loss(net, b):
+    """The rendering loss of the chain's maps on a batch of real photos (earlier stages frozen)."""
+    photo, light = b["photo"], b["light"]
+    context, base = flash.context(light, light, photo.shape[-1]), flash.base(photo, light, light)
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        with torch.no_grad():
+            masks = net.run_masks(photo, context).clamp(0, 1)
+            aux = net.run_aux(photo, masks, context).clamp(0, 1)
+        pred = net.run_maps(photo, masks, aux, base, context)
+    return real_mod.rendering_loss({k: v.float() for k, v in pred.items()}, photo, light)
+
+
+def net_weights(net):
+    return getattr(net, "loss_weights", dict(RunConfig.weights))
+
+
+def maps_loss(pred, target, weights):
+    return sum(w * (pred[k].float() - target[k]).abs().mean() for k, w in weights.items())
+
+
+class Run:
+    """One run folder: load or start, train, save, evaluate."""
+
+    def __init__(self, folder, config=None, log=print, des19=None):
+        self.folder = folder
+        self.log = log
+        os.makedirs(folder, exist_ok=True)
+        path = os.path.join(folder, "state.pt")
+        if os.path.isfile(path):
+            state = torch.load(path, map_location="cpu", weights_only=False)
+            self.config = _config_from(state["config"])
+            if config is not None and dataclasses.asdict(config)["schedule"] != dataclasses.asdict(self.config)["schedule"]:
+                self.config = dataclasses.replace(self.config, schedule=config.schedule)
+        else:
+            state = None
+            self.config = config or RunConfig()
+        c = self.config
+        with torch.random.fork_rng():
+            torch.manual_seed(c.seed)  # the initial weights are the run's, whatever the process did before
+            self.net = nets.build(c.tier)
+        self.net.loss_weights = dict(c.weights)
+        self.g = torch.Generator().manual_seed(c.seed)
+        self.step, self.stage_index, self.stage_samples, self.samples, self.cpu = 0, 0, 0, 0, 0.0
+        self.started = None
+        if state is not None:
+            self.net.load_state_dict(state["model"])
+            self.g.set_state(state["generator"])
+            self.step, self.stage_index = state["step"], state["stage_index"]
+            self.stage_samples, self.samples, self.cpu = state["stage_samples"], state["samples"], state["cpu"]
+        self.optimizer = self._optimizer()
+        if state is not None and state.get("optimizer") is not None:
+            self.optimizer.load_state_dict(state["optimizer"])
+        self.bank = None
+        self.real = None
+        self.des19 = des19
+        self.stop_requested = False
+
+    # -- state --------------------------------------------------------------------------------
+    @property
+    def stage(self):
+        sched = self.config.schedule
+        return sched[self.stage_index][0] if self.stage_index < len(sched) else None
+
+    def _optimizer(self):
+        if self.stage is None:
+            return None
+        module = getattr(self.net, self.stage)
+        return torch.optim.Adam(module.parameters(), lr=self.config.lr, betas=(0.5, 0.9), fused=True)
+
+    def state(self):
+        return {"model": self.net.state_dict(), "optimizer": self.optimizer.state_dict() if self.optimizer else None,
+                "generator": self.g.get_state(), "step": self.step, "stage_index": self.stage_index,
+                "stage_samples": self.stage_samples, "samples": self.samples, "cpu": self.cpu,
+                "config": dataclasses.asdict(self.config)}
+
+    def save(self):
+        atomic_torch_save(self.state(), os.path.join(self.folder, "state.pt"))
+
+    # -- training -----------------------------------------------------------------------------
+    def _lr(self):
+        return self.config.lr * 0.5 ** (self.stage_samples // self.config.halve_every)
+
+    def load_bank(self):
+        if self.bank is None:
+            root = self.config.bank_root or bank_mod.default_root()
+            if bank_mod.count(root) < self.config.bank_count:
+                bank_mod.grow(root, self.config.bank_count, progress=self.log)
+            self.bank = bank_mod.Bank(root)
+        return self.bank
+
+    def load_real(self):
+        """The real training photos (:mod:`export.engine.real`), or False without the shared data."""
+        if self.real is None:
+            from export.files import shared_data
+
+            root = self.config.real_root or os.path.join(shared_data(), "real")
+            train = real_mod.split(root)[0] if os.path.isdir(root) else []
+            self.real = real_mod.RealPhotos(train, log=self.log) if train else False
+            if self.real:
+                self.log(f"real photos: {len(self.real)} in the training pool")
+        return self.real
+
+    def train_step(self):
+        """One step of the current stage; returns its loss."""
+        c = self.config
+        bank = self.load_bank()
+        t0 = time.process_time()
+        real = self.stage == "maps" and c.real_fraction > 0 and float(torch.rand(1, generator=self.g)) < c.real_fraction
+        if real and not self.load_real():
+            real = False
+        self.net.train()
+        for group in self.optimizer.param_groups:
+            group["lr"] = self._lr()
+        if real:
+            loss = c.real_weight * real_loss(self.net, self.real.batch(self.g, c.batch, c.size))
+        else:
+            loss = stage_loss(self.net, self.stage, batches.make(bank, self.g, c.batch, c.size, self.stage))
+        self.optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        self.optimizer.step()
+        self.step += 1
+        self.stage_samples += c.batch
+        self.samples += c.batch
+        self.cpu += time.process_time() - t0
+        if self.stage_samples >= c.schedule[self.stage_index][1]:
+            self.log(f"stage {self.stage} done at {self.stage_samples} samples")
+            self.stage_index += 1
+            self.stage_samples = 0
+            self.optimizer = self._optimizer()
+        return float(loss.detach())
+
+    def request_stop(self, *_):
+        self.stop_requested = True
+
+    def train(self, steps=None, minutes=None, evaluate=True):
+        """Train until the schedule ends, ``steps`` more steps, ``minutes`` of wall time or a signal;
+        checkpoints as configured; returns the number of steps taken."""
+        old = {s: signal.signal(s, self.request_stop) for s in (signal.SIGTERM, signal.SIGINT)}
+        try:
+            return self._train(steps, minutes, evaluate)
+        finally:
+            for s, h in old.items():
+                signal.signal(s, h)
+
+    def _train(self, steps, minutes, evaluate):
+        c = self.config
+        start = time.time()
+        last_save = last_eval = time.time()
+        taken, running = 0, []
+        while self.stage is not None and not self.stop_requested:
+            if steps is not None and taken >= steps:
+                break
+            if minutes is not None and time.time() - start > minutes * 60:
+                break
+            running.append(self.train_step())
+            taken += 1
+            if time.time() - last_save > c.checkpoint_minutes * 60:
+                self.save()
+                last_save = time.time()
+            if evaluate and time.time() - last_eval > c.eval_minutes * 60:
+                self.record(float(np.mean(running)) if running else None)
+                running = []
+                last_eval = time.time()
+                self.save()
+                last_save = time.time()
+            if taken % 50 == 0:
+                self.log(f"step {self.step} stage {self.stage} samples {self.samples} "
+                         f"loss {np.mean(running[-50:]):.4f} cpu {self.cpu / 3600:.2f} h")
+        self.save()
+        if evaluate and running:
+            self.record(float(np.mean(running)))
+        return taken
+
+    # -- evaluation ---------------------------------------------------------------------------
+    def _val_batches(self, stage):
+        g = torch.Generator().manual_seed(12345)
+        n = self.config.val_samples
+        return [batches.make(self.load_bank(), g, 16, self.config.size, stage) for _ in range(max(1, n // 16))]
+
+    @torch.no_grad()
+    def validate(self, stage):
+        self.net.eval()
+        losses = [float(stage_loss(self.net, stage, b)) for b in self._val_batches(stage)]
+        return float(np.mean(losses))
+
+    def record(self, train_loss):
+        stage = self.stage or self.config.schedule[-1][0]
+        entry = {"samples": self.samples, "cpu_hours": round(self.cpu / 3600, 4), "step": self.step, "stage": stage,
+                 "train_loss": train_loss, "val_loss": self.validate(stage), "time": time.time()}
+        des19 = self.des19 if self.des19 is not None else load_des19()
+        if des19:
+            entry["des19"] = score_des19(self.net, des19)
+        with open(os.path.join(self.folder, "curve.jsonl"), "a") as f:
+            f.write(json.dumps(entry) + "\n")
+        self.log(f"eval: {json.dumps(entry)}")
+        return entry
+
+
+# -- Des19 ------------------------------------------------------------------------------------
+def load_des19(root=None):
+    """[(name, photo (1, 3, 256, 256) encoded, ground truth dict of (H, W, C) numpy as the scorer reads
+    them)] or [] without the shared data."""
+    from export.files import shared_data
+    from svbrdf_cli.imageio import read_image
+
+    root = root or os.path.join(shared_data(), "validation", "des19")
+    if not os.path.isdir(root):
+        return []
+    out = []
+    for name in sorted(os.listdir(root)):
+        d = os.path.join(root, name)
+        if not os.path.isfile(os.path.join(d, "input.png")):
+            continue
+        photo = torch.from_numpy(read_image(os.path.join(d, "input.png"))[..., :3].copy()).permute(2, 0, 1)[None].float()
+        gt = {k: read_image(os.path.join(d, k + ".png"))[..., :3].astype(np.float64) for k in cv.MAP_NAMES}
+        out.append((name, photo, gt))
+    return out
+
+
+def relief(pn, gn):
+    """The reference scorer's relief: correlation of predicted and true tilt (stored normals)."""
+    p = pn[..., :2] * 2 - 1
+    g = gn[..., :2] * 2 - 1
+    p = (p - p.mean((0, 1))).ravel()
+    g = (g - g.mean((0, 1))).ravel()
+    den = np.sqrt((p ** 2).sum() * (g ** 2).sum())
+    return float((p * g).sum() / den) if den > 1e-9 else 0.0
+
+
+def des19_geometry(n):
+    light = torch.tensor(cv.FLASH_POSITION, dtype=torch.float32).expand(n, 3)
+    return light, light
+
+
+@torch.no_grad()
+def predict(net, photo, camera, light):
+    """Stored maps (B, C, H, W) of the whole chain for encoded photos (B, 3, H, W)."""
+    net.eval()
+    h = photo.shape[-1]
+    context = flash.context(camera, light, h)
+    base = flash.base(photo, camera, light)
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        masks, aux, maps = net(photo, context, base)
+    return {k: v.float() for k, v in maps.items()}
+
+
+def score_des19(net, des19):
+    """The reference scorer's numbers (8-bit maps, linear albedo, adapted roughness) for the chain."""
+    rows = {k: [] for k in ("normal", "diffuse", "roughness", "specular", "relief")}
+    for name, photo, gt in des19:
+        cam, light = des19_geometry(1)
+        pred = predict(net, photo, cam, light)
+        p = {k: (v[0].permute(1, 2, 0).numpy().astype(np.float64) * 255).round() / 255 for k, v in pred.items()}
+        p["roughness"] = np.repeat(p["roughness"], 3, -1)
+        for k in ("diffuse", "specular"):
+            p[k] = p[k] ** cv.ALBEDO_GAMMA
+        for k in ("normal", "diffuse", "specular"):
+            rows[k].append(np.sqrt(((p[k] - gt[k]) ** 2).mean()))
+        rows["relief"].append(relief(p["normal"], gt["normal"]))
+        r = (lambda x: 0.9 * x[..., 0] + 0.1)
+        rows["roughness"].append(np.sqrt(((r(p["roughness"]) - r(gt["roughness"])) ** 2).mean()))
+    return {k: round(float(np.mean(v)), 4) for k, v in rows.items()}

@@ -1,0 +1,166 @@
+"""The fast training engine: bank, batches, flash context, exact resume, clean stop."""
+
+import os
+import signal
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import torch
+
+from export.engine import bank as bank_mod
+from export.engine import batches, flash, nets
+from export.engine.run import Run, RunConfig
+from export.render import targets as render_targets
+from svbrdf_cli import conventions as cv
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+@pytest.fixture(scope="module", autouse=True)
+def small_shards():
+    """Procedural shards of 16 materials: a bank of a few seconds."""
+    old = bank_mod.CC0_FRACTION, bank_mod.SHARD
+    bank_mod.CC0_FRACTION, bank_mod.SHARD = 0.0, 16
+    yield
+    bank_mod.CC0_FRACTION, bank_mod.SHARD = old
+
+
+@pytest.fixture(scope="module")
+def small_bank(tmp_path_factory, small_shards):
+    """Two procedural shards."""
+    root = str(tmp_path_factory.mktemp("bank"))
+    bank_mod.grow(root, 2 * bank_mod.SHARD, progress=None)
+    return root
+
+
+def test_bank_round_trip_keeps_the_maps(small_bank):
+    bank = bank_mod.Bank(small_bank)
+    assert len(bank) == 2 * bank_mod.SHARD
+    assert bank_mod.count(small_bank) == len(bank)
+    maps = bank.maps(torch.tensor([0, 5]))
+    again = bank_mod.decode(bank_mod.encode(maps))
+    for k in cv.MAP_NAMES:
+        assert torch.allclose(maps[k], again[k], atol=3e-3), k
+    n = maps["normal"]
+    assert torch.allclose((n * n).sum(1), torch.ones_like(n[:, 0]), atol=1e-5)
+
+
+def test_bank_grows_the_same_in_two_sittings(tmp_path, small_bank):
+    bank_mod.grow(str(tmp_path), bank_mod.SHARD, progress=None)
+    bank_mod.grow(str(tmp_path), 2 * bank_mod.SHARD, progress=None)
+    a, b = bank_mod.Bank(str(tmp_path)), bank_mod.Bank(small_bank)
+    for k in a.arrays:
+        assert torch.equal(a.arrays[k], b.arrays[k]), k
+
+
+def test_a_batch_has_what_each_stage_needs(small_bank):
+    bank = bank_mod.Bank(small_bank)
+    g = torch.Generator().manual_seed(0)
+    for stage, names in batches.STAGE_TARGETS.items():
+        b = batches.make(bank, g, 3, 64, stage)
+        assert b["photo"].shape == (3, 3, 64, 64) and b["context"].shape == (3, 4, 64, 64)
+        assert b["base"].shape == (3, 10, 64, 64)
+        for k in names:
+            assert b[k].shape == (3, 3, 64, 64) and torch.isfinite(b[k]).all(), k
+    assert set(cv.MAP_NAMES) <= set(b)
+    assert 0.05 < float(b["photo"].mean()) < 0.95
+
+
+def test_fast_highlight_removed_matches_the_reference(small_bank):
+    bank = bank_mod.Bank(small_bank)
+    g = torch.Generator().manual_seed(3)
+    maps = batches.materials(bank, g, 6, 96)
+    cap = {k: v.float() for k, v in batches.simulate.sample_capture(g, 6).items()}
+    shot = batches.photograph(maps, cap, g)
+    ref = render_targets.highlight_removed_pair(maps, cap["camera"], shot["intensity"])
+    fast = batches.highlight_removed_fast(maps, cap["camera"], shot["intensity"])
+    for r, f in zip(ref, fast):
+        assert float((r - f).abs().mean()) < 0.03
+    # and it is not the photo: the flash image's highlight is gone
+    assert float((fast[0] - cv.image_to_encoded(cv.image_to_linear(shot["I"]))).abs().mean()) > 0.005
+
+
+def test_flash_context_and_base_agree_with_numpy():
+    g = torch.Generator().manual_seed(1)
+    photo = torch.rand(2, 3, 32, 32, generator=g)
+    light = torch.tensor([[0.2, -0.1, 2.5], [-0.4, 0.3, 1.8]])
+    ctx, base = flash.context(light, light, 32), flash.base(photo, light, light)
+    for i in range(2):
+        c = flash.context_numpy(light[i].numpy(), 32)
+        b = flash.base_numpy(photo[i].permute(1, 2, 0).numpy(), light[i].numpy())
+        assert np.allclose(ctx[i].permute(1, 2, 0).numpy(), c, atol=1e-5)
+        assert np.allclose(base[i].permute(1, 2, 0).numpy(), b, atol=1e-4)
+
+
+def test_base_reads_the_albedo_of_a_matte_photo_at_the_conventions_flash():
+    maps = {"normal": torch.tensor([0.0, 0, 1]).reshape(1, 3, 1, 1).expand(1, 3, 64, 64),
+            "diffuse": torch.full((1, 3, 64, 64), 0.3), "roughness": torch.ones(1, 1, 64, 64),
+            "specular": torch.zeros(1, 3, 64, 64)}
+    light = torch.tensor([cv.FLASH_POSITION], dtype=torch.float32)
+    photo = render_targets.flash_image(maps, light=light, intensity=cv.FLASH_INTENSITY)
+    d = cv.albedo_to_linear(flash.base(photo, light, light)[:, 3:6])
+    inside = d[..., 16:48, 16:48]
+    assert torch.allclose(inside, torch.full_like(inside, 0.3), atol=0.01)
+
+
+def test_untrained_chain_returns_the_base_estimate():
+    net = nets.build()
+    photo = torch.rand(1, 3, 64, 64)
+    light = torch.tensor([cv.FLASH_POSITION], dtype=torch.float32)
+    base = flash.base(photo, light, light)
+    with torch.no_grad():
+        _, aux, maps = net.eval()(photo, flash.context(light, light, 64), base)
+    assert torch.allclose(aux, photo.repeat(1, 3, 1, 1), atol=1e-6)
+    stored = torch.cat([maps[k] for k in cv.MAP_NAMES], 1)
+    assert torch.allclose(stored, base, atol=1e-5)
+
+
+CFG = RunConfig(size=32, batch=2, schedule=(("masks", 6), ("aux", 4), ("maps", 4)), val_samples=2,
+                checkpoint_minutes=1e9, eval_minutes=1e9)
+
+
+def _run(folder, bank_root):
+    import dataclasses
+
+    return Run(str(folder), dataclasses.replace(CFG, bank_root=bank_root, bank_count=2 * bank_mod.SHARD),
+               log=lambda m: None, des19=[])
+
+
+def test_a_run_stopped_and_resumed_equals_the_run_that_never_stopped(tmp_path, small_bank):
+    torch.manual_seed(0)
+    full = _run(tmp_path / "full", small_bank)
+    full.train(steps=8, evaluate=False)  # crosses two stage boundaries (3 masks, 2 aux, 2 maps steps)
+    part = _run(tmp_path / "part", small_bank)
+    part.train(steps=4, evaluate=False)
+    del part
+    torch.manual_seed(123)  # the process's own state must not matter
+    resumed = _run(tmp_path / "part", small_bank)
+    assert resumed.step == 4
+    resumed.train(steps=4, evaluate=False)
+    assert resumed.step == full.step == 7 and resumed.stage is None
+    a, b = full.net.state_dict(), resumed.net.state_dict()
+    assert all(torch.allclose(a[k], b[k], atol=1e-6, rtol=1e-5) for k in a)
+    assert not all(torch.equal(a[k], nets.build().state_dict()[k]) for k in a)  # it did train
+
+
+def test_sigterm_saves_and_exits_zero(tmp_path, small_bank):
+    folder = tmp_path / "run"
+    code = (
+        "import dataclasses, os, signal, sys, threading\n"
+        "sys.path.insert(0, sys.argv[3])\n"
+        "from export.engine.run import Run, RunConfig\n"
+        "cfg = RunConfig(size=32, batch=2, schedule=(('masks', 10**9),), val_samples=2,\n"
+        "                checkpoint_minutes=1e9, eval_minutes=1e9, bank_root=sys.argv[2], bank_count=32)\n"
+        "run = Run(sys.argv[1], cfg, log=lambda m: None, des19=[])\n"
+        "threading.Timer(3.0, lambda: os.kill(os.getpid(), signal.SIGTERM)).start()\n"
+        "run.train(evaluate=False)\n"
+        "print('stopped at', run.step)\n"
+    )
+    res = subprocess.run([sys.executable, "-c", code, str(folder), small_bank, ROOT], capture_output=True, text=True,
+                         timeout=300)
+    assert res.returncode == 0, res.stderr
+    state = torch.load(folder / "state.pt", weights_only=False)
+    assert state["step"] == int(res.stdout.split()[-1]) > 0
+    assert signal.getsignal(signal.SIGTERM) is not None
