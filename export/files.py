@@ -68,3 +68,16 @@ def command_errors():
         yield
     except SvbrdfError as e:
         raise click.ClickException(str(e)) from e
+
+
+#: The real benchmark photos (every n-th of the sorted list, so each collection is represented).
+REAL_PHOTOS = 12
+
+
+def real_photos(real_root, count=REAL_PHOTOS):
+    """Up to ``count`` real photos, spread over the sorted list of ``real_root``'s photos."""
+    files = sorted(os.path.join(d, f) for d, _, fs in os.walk(real_root) for f in fs
+                   if f.lower().endswith((".jpg", ".jpeg", ".png")) and not f.startswith("paper_")
+                   and "reference_maps" not in d)
+    step = max(1, len(files) // count) if files else 1
+    return files[::step][:count]

@@ -96,7 +96,7 @@ class SeedBank:
         return out
 
 
-def _blend_mask(g, batch, size, device, dtype):
+def blend_mask(g, batch, size, device, dtype):
     """Smooth random (B, 1, H, W) masks in [0, 1]: thresholded low-frequency noise."""
     cells = int(torch.randint(2, 7, (1,), generator=g, device=g.device))
     noise = torch.rand(batch, 1, cells + 3, cells + 3, generator=g, device=g.device).to(device=device, dtype=dtype)
@@ -136,7 +136,7 @@ def materials(g, batch, config=DataConfig(), seeds=None, device=None, dtype=torc
     mix = torch.rand(batch, generator=g, device=g.device) < config.mix_fraction
     if bool(mix.any()):
         other, other_source = draw(batch)
-        mixed = augment.blend(maps, other, _blend_mask(g, batch, size, device, dtype))
+        mixed = augment.blend(maps, other, blend_mask(g, batch, size, device, dtype))
         maps = _choose(mix.to(device), maps, mixed)
         source = [f"{a}+{b}" if m else a for a, b, m in zip(source, other_source, mix.tolist())]
     k = torch.randint(0, 4, (1,), generator=g, device=g.device).item()

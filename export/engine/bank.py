@@ -150,9 +150,9 @@ class _Cc0Source:
 
 
 def _blend_masks(g, n):
-    from export.data.dataset import _blend_mask
+    from export.data.dataset import blend_mask
 
-    return _blend_mask(g, n, SIZE, "cpu", torch.float32)
+    return blend_mask(g, n, SIZE, "cpu", torch.float32)
 
 
 def grow(root=None, target=8000, seed=0, shared=None, progress=print):

@@ -1,9 +1,9 @@
 """Real flash photos in the training loop: self-supervised batches, and the photos kept out of them.
 
 A real photo has no ground truth, but it is its own target: the predicted maps, rendered under the
-flash the capture estimates from the photo (:func:`svbrdf_cli.geometry.for_capture`: the highlight's
+flash the capture estimates from the photo (:func:`svbrdf_cli.infer.geometry.for_capture`: the highlight's
 centre, the EXIF or the falloff's height), must give the photo back. Each photo goes through the
-runtime's own path once (decode, auto crop, :data:`svbrdf_cli.pipeline.NETWORK_SIZE`², auto exposure:
+runtime's own path once (decode, auto crop, :data:`svbrdf_cli.infer.exposure.NETWORK_SIZE`², auto exposure:
 exactly what ``svbrdf capture`` feeds a model) and is kept in memory with its flash position; a batch
 takes random windows of them (rotations and mirrors are left out: they would move the camera's foot),
 with the flash position moved into each window's coordinates.
@@ -13,7 +13,7 @@ intensity fitted in closed form (one auto-exposed photo does not give it), leavi
 and the highlight's core (where a clipped photo says least and the smallest error in the flash
 position matters most).
 
-**Kept out** (:func:`split`): the 12 real benchmark photos (:func:`export.stability.real_photos`),
+**Kept out** (:func:`split`): the 12 real benchmark photos (:func:`export.files.real_photos`),
 every photo of ``paper_real`` and ``card_blue_9lights`` (they are scored), and every fifth
 ``henzler_train`` folder (sorted), for measuring what training on real photos does on photos it has
 not seen (the false-metal rate, the previews). Trained on: the rest of ``henzler_train`` and
@@ -50,7 +50,7 @@ def _photos(root, sub):
 
 def split(real_root):
     """(train, held_out) lists of photo paths under ``real_root`` (see the module docstring)."""
-    from export.stability import real_photos
+    from export.files import real_photos
 
     scored = set(real_photos(real_root))
     train, held = [], []
@@ -67,15 +67,17 @@ def split(real_root):
 def prepare(path):
     """(encoded network input (S, S, 3) float32, flash position (3,)) of one photo, as ``svbrdf capture``
     makes them; None when the capture path refuses the photo."""
-    from svbrdf_cli import geometry, ingest, rectify
     from svbrdf_cli.errors import SvbrdfError
-    from svbrdf_cli.pipeline import network_input
+    from svbrdf_cli.infer import geometry
+    from svbrdf_cli.infer.exposure import network_input
+    from svbrdf_cli.ingest import photo as ingest
+    from svbrdf_cli.rectify import crops as rectify
 
     try:
         photo = ingest.load_photo(path)
         crop = rectify.crop(photo.linear, "auto")
         net_in = network_input(crop.image)
-        geo = geometry.for_capture(net_in, path, photo.linear.shape, crop.report)
+        geo = geometry.for_capture(net_in, photo.focal_35mm, photo.linear.shape, crop.report)
     except (SvbrdfError, ValueError, OSError):
         return None
     return net_in.astype(np.float32), np.asarray(geo.light, np.float32)

@@ -29,6 +29,7 @@ import tempfile
 
 import numpy as np
 
+from export.files import REAL_PHOTOS, real_photos
 from export.studies.evaluate import score
 from export.render.brdf import render_maps
 from svbrdf_cli import conventions as cv
@@ -37,8 +38,6 @@ from svbrdf_cli.infer.exposure import network_input
 from svbrdf_cli.write.mapset import stored_to_linear, write_map_set
 
 MAPS = cv.MAP_NAMES
-#: Real photos used (every n-th of the sorted list, so each collection is represented).
-REAL_PHOTOS = 12
 
 
 def _clip(x):
@@ -138,15 +137,6 @@ def relative_change(changes, contrasts):
 
 def _finite(maps):
     return all(np.isfinite(v).all() for v in maps.values())
-
-
-def real_photos(real_root, count=REAL_PHOTOS):
-    """Up to ``count`` real photos, spread over the sorted list of ``real_root``'s photos."""
-    files = sorted(os.path.join(d, f) for d, _, fs in os.walk(real_root) for f in fs
-                   if f.lower().endswith((".jpg", ".jpeg", ".png")) and not f.startswith("paper_")
-                   and "reference_maps" not in d)
-    step = max(1, len(files) // count) if files else 1
-    return files[::step][:count]
 
 
 def real_crops(real_root, count):
