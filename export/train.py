@@ -365,9 +365,12 @@ def record_provenance(out, trainer, val):
     prov = read_json(path)
     cfg = trainer.cfg
     prov.setdefault("stages", {})[trainer.stage] = {
-        "tier": cfg.tier, "variant": cfg.variant, "refine": cfg.refine, "albedo_level": cfg.albedo_level if trainer.stage == "maps" else None,
-        "physical_version": PHYSICAL_VERSION if cfg.refine else None, "steps": trainer.step, "batch": cfg.batch, "size": cfg.size, "seed": cfg.seed,
-        "device": str(trainer.device) + ("" if trainer.device.type != "cpu" else f" ({platform.processor() or platform.machine()}, {torch.get_num_threads()} threads)"),
+        "tier": cfg.tier, "variant": cfg.variant, "refine": cfg.refine,
+        "albedo_level": cfg.albedo_level if trainer.stage == "maps" else None,
+        "physical_version": PHYSICAL_VERSION if cfg.refine else None, "steps": trainer.step, "batch": cfg.batch,
+        "size": cfg.size, "seed": cfg.seed,
+        "device": str(trainer.device) + ("" if trainer.device.type != "cpu" else
+                                         f" ({platform.processor() or platform.machine()}, {torch.get_num_threads()} threads)"),
         "seconds": round(trainer.elapsed, 1), "samples_seen": trainer.step * cfg.batch,
         "losses": {"adversarial": cfg.adversarial, "perceptual": cfg.perceptual} if trainer.stage == "aux" else None,
         "validation": val, "final_loss": trainer.history[-1]["loss"] if trainer.history else None,
@@ -412,7 +415,9 @@ def load_trained(out, tier=None, device="cpu", stages=STAGES):
               help="lite: one small end-to-end UNet; fast, balanced, best: the chain at three widths (default "
                    "fast); swift: the fast engine's chain (--benchmark only; train it with python -m export.engine).")
 @click.option("--out", type=click.Path(file_okay=False), default=None, help="Run folder (default runs/<tier>).")
-@click.option("--steps", type=int, default=None, help="Steps per stage (split for --stage all). On a resumed run, its new total: more to extend it, its current step to end it there (validation and provenance written).")
+@click.option("--steps", type=int, default=None,
+              help="Steps per stage (split for --stage all). On a resumed run, its new total: more to extend it, "
+                   "its current step to end it there (validation and provenance written).")
 @click.option("--minutes", type=float, default=None, help="Time budget instead of --steps (split for --stage all).")
 @click.option("--batch", default=8, show_default=True)
 @click.option("--size", default=128, show_default=True, help="Training crop size (multiple of 32).")

@@ -325,6 +325,8 @@ def aux_light_intensities(positions, intensity=LIGHT_INTENSITY, height=CAMERA_HE
 
     Args:
         positions: (..., K, 3) light positions.
+        intensity: the flash's intensity (:data:`LIGHT_INTENSITY`).
+        height: the camera's height, broadcastable to (..., K).
 
     Returns:
         (..., K) intensities.

@@ -176,7 +176,7 @@ def _png_chunk(kind, body):
 
 
 def _deflate(data):
-    """zlib stream of ``data`` (a buffer): ISA-L's when installed (five times zlib's speed)."""
+    """Zlib stream of ``data`` (a buffer): ISA-L's when installed (five times zlib's speed)."""
     try:
         from isal import isal_zlib
     except ImportError:

@@ -36,6 +36,7 @@ def resize(image, side, up="cubic"):
     Args:
         image: (H, W) or (H, W, C) array (float32 or float64, any range).
         side: the output side in pixels.
+        up: "cubic" or "linear", the filter when enlarging.
 
     Returns:
         ``image`` itself when it already has that size, else (side, side, C) (C = 1 for a 2-D
@@ -62,6 +63,7 @@ def blur(image, sigma):
 
     Args:
         image: (H, W) or (H, W, C) array; taken as float32.
+        sigma: the standard deviation in pixels.
 
     Returns:
         float32 array; (H, W) for an (H, W, 1) input (OpenCV drops a single channel).
@@ -77,6 +79,7 @@ def box(image, r):
 
     Args:
         image: (H, W, C) float32 array.
+        r: the window's radius in pixels.
 
     Returns:
         (H, W, C) float32.

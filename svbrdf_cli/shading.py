@@ -70,7 +70,9 @@ def brdf(n, l, v, diffuse, roughness, specular, ndf=None):
     """Cook-Torrance BRDF value f(n, l, v), without the cosine.
 
     Args:
-        n, l, v: (..., 3) unit normal, light and view directions.
+        n: (..., 3) unit normal.
+        l: (..., 3) unit direction to the light.
+        v: (..., 3) unit direction to the viewer.
         diffuse: (..., 3) linear diffuse albedo in [0, 1].
         roughness: (..., 1) roughness in [0, 1].
         specular: (..., 3) linear specular albedo (F0) in [0, 1].

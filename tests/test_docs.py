@@ -153,3 +153,50 @@ def test_snippets_come_from_blocks_comments_and_inline_code(tmp_path):
 def test_documented_commands_exist(doc):
     bad = [f"{doc.relative_to(ROOT)}:{no}: {code!r}: {p}" for no, code in code_snippets(doc) for p in problems(code)]
     assert not bad, "documented commands that do not exist:\n" + "\n".join(bad)
+
+
+def _documented():
+    """Every ``svbrdf`` command the docs show (with its options), every option they name, and every
+    ``python -m`` module."""
+    commands, options, modules = {}, set(), set()
+    for doc in DOCS:
+        for _, code in code_snippets(doc):
+            for part in _SEPARATORS.split(code):
+                words = _tokens(part)
+                options.update(_OPTION.match(w).group(0) for w in words if _OPTION.match(w))
+                names = [w.rpartition("/")[2] for w in words]
+                if "svbrdf" in names:
+                    rest = [w for w in words[names.index("svbrdf") + 1:]]
+                    cmd = next((w for w in rest if _COMMAND.match(w)), None)
+                    if cmd:
+                        commands.setdefault(cmd, set()).update(_OPTION.match(w).group(0) for w in rest
+                                                                if _OPTION.match(w))
+                if "-m" in words and words.index("-m") + 1 < len(words):
+                    modules.add(words[words.index("-m") + 1])
+    return commands, options, modules
+
+
+def test_every_command_and_option_is_documented():
+    commands, options, _ = _documented()
+    missing = []
+    for name, cmd in [(None, cli), *cli.commands.items()]:
+        if name is not None and name not in commands:
+            missing.append(f"svbrdf {name}")
+        for p in cmd.params:
+            if isinstance(p, click.Option) and not p.hidden and not set(p.opts) & options:
+                missing.append(f"svbrdf {name or ''} {'/'.join(p.opts)}")
+    assert not missing, "commands and options no doc shows (README.md, docs/*.md):\n" + "\n".join(missing)
+
+
+def test_every_runnable_module_is_documented():
+    _, _, modules = _documented()
+    runnable = set()
+    for path in sorted((ROOT / "export").rglob("*.py")):
+        text = path.read_text(encoding="utf-8")
+        name = ".".join(path.relative_to(ROOT).with_suffix("").parts)
+        if path.name == "__main__.py":
+            runnable.add(name.rpartition(".")[0])
+        elif 'if __name__ == "__main__"' in text:
+            runnable.add(name)
+    missing = sorted(runnable - modules)
+    assert not missing, "python -m modules no doc shows how to run:\n" + "\n".join(missing)

@@ -231,7 +231,7 @@ def fbm(g, x, y, batch, octaves=5, lacunarity=2.0, gain=0.5, channels=1, mode="p
 
 
 def turbulence(g, x, y, batch, octaves=5, **kw):
-    """fBm of |noise|: billowy, creased; >= 0."""
+    """FBm of |noise|: billowy, creased; >= 0."""
     return fbm(g, x, y, batch, octaves, mode="turbulence", **kw)
 
 

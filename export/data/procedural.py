@@ -298,7 +298,8 @@ def wood(g, batch, size, device, dtype=torch.float32):
     pores = noise_fields.smoothstep(0.5, 1.4, c.fbm(xw * c.p(10, 30), y * c.p(150, 350), 2)) * c.p(0, 1)
     light = c.hsv((0.055, 0.11), (0.35, 0.7), (0.45, 0.9))
     dark_f = c.p(0.35, 0.75)
-    tint = torch.exp((pv[:, 3:4] - 0.5) * c.p(0.0, 0.6) + (pv[:, 4:5] - 0.5) * 0.1 * torch.tensor([1.0, 0.0, -1.0], device=device, dtype=dtype).reshape(1, 3, 1, 1))
+    warm = torch.tensor([1.0, 0.0, -1.0], device=device, dtype=dtype).reshape(1, 3, 1, 1)
+    tint = torch.exp((pv[:, 3:4] - 0.5) * c.p(0.0, 0.6) + (pv[:, 4:5] - 0.5) * 0.1 * warm)
     diffuse = light * tint * torch.exp(torch.log(dark_f) * late + 0.12 * fib - 0.4 * pores)
     # Seams between planks.
     seam_w = c.p(0.002, 0.008)
@@ -691,7 +692,8 @@ def scales(g, batch, size, device, dtype=torch.float32):
     base = c.hsv((0.0, 1.0), (0.1, 0.7), (0.1, 0.7))
     alt = c.hsv((0.0, 1.0), (0.1, 0.7), (0.1, 0.7))
     colour = noise_fields.lerp(base, alt, (val * c.p(0.0, 1.0)))
-    rim = torch.where(fish, 1 - noise_fields.smoothstep(0.0, 0.25, best_in), 1 - noise_fields.smoothstep(gap, gap + 0.15, hx["edge"]))
+    rim = torch.where(fish, 1 - noise_fields.smoothstep(0.0, 0.25, best_in),
+                      1 - noise_fields.smoothstep(gap, gap + 0.15, hx["edge"]))
     diffuse = colour * torch.exp(-c.p(0.0, 1.0) * rim + 0.1 * c.fbm(x * sc * 2, y * sc * 2, 3))
     hex_tile = kind < 1  # hex tiles with grout
     grout = c.hsv((0.05, 0.12), (0.0, 0.2), (0.3, 0.8))
@@ -762,7 +764,8 @@ def bark(g, batch, size, device, dtype=torch.float32):
     plates = c.worley(xs * 0.8, ys * 0.8, jitter=1.0, channels=1)
     plate_edge = noise_fields.smoothstep(0.0, 0.25, plates["f2"] - plates["f1"])
     mix = c.p(0.1, 0.5)
-    height = noise_fields.normalize01((1 - mix) * noise_fields.normalize01(rid) + mix * plate_edge * (0.7 + 0.3 * plates["value"]))
+    height = noise_fields.normalize01((1 - mix) * noise_fields.normalize01(rid)
+                                      + mix * plate_edge * (0.7 + 0.3 * plates["value"]))
     height = height ** c.p(0.5, 1.2)
     fine = c.fbm(x * 60, y * 20, 3)
     height = (height + 0.05 * fine).clamp(0, 1)
@@ -787,7 +790,8 @@ def ground(g, batch, size, device, dtype=torch.float32):
     xs, ys = noise_fields.warp(g, x * sc, y * sc, batch, c.p(0.1, 0.3), 0.8)
     w = c.worley(xs, ys, jitter=1.0, channels=4)
     size_r = 0.3 + 0.4 * w["value"][:, 3:4]
-    present = (w["value"][:, 2:3] < torch.where(kind < 1, c.p(0.5, 0.9), torch.where(kind < 2, c.p(0.9, 1.0), c.p(0.2, 0.5)))).to(dtype)
+    share = torch.where(kind < 1, c.p(0.5, 0.9), torch.where(kind < 2, c.p(0.9, 1.0), c.p(0.2, 0.5)))
+    present = (w["value"][:, 2:3] < share).to(dtype)
     stone = (1 - (w["f1"] / size_r).clamp(0, 1) ** 2).clamp_min(0).sqrt() * present
     binder_n = c.fbm(x * c.p(20, 60), y * c.p(20, 60), 4)
     height = 0.25 + 0.05 * binder_n + 0.65 * stone

@@ -34,7 +34,6 @@ import cv2
 import numpy as np
 
 from export.files import shared_root
-from svbrdf_cli import conventions as cv
 from svbrdf_cli.imageops import luminance
 
 #: Real-photo sets under ``<shared>/data/real/``, in the default order.

@@ -1,6 +1,6 @@
-"""Figure of the intermediate targets, in the style of the paper's Figs. 4 and 6.
+r"""Figure of the intermediate targets, in the style of the paper's Figs. 4 and 6.
 
-    python -m export.render.figure --materials ../shared/data/materials/ambientcg \\
+    python -m export.render.figure --materials ../shared/data/materials/ambientcg \
         --ids Tiles032 PavingStones098 -o docs/figures/intermediates.png
 
 One row per material: the flash image I, I_bf, I_hr, I_hr^2, M_b and M_h

@@ -291,7 +291,8 @@ def calibration_table(rule):
             c = st["cheapest_per_signal"].get(n)
             lines.append(f"| {st['from']} → {st['to']} | {n} | {cal['signal_seconds_256'][n]:.4f} | "
                          f"{_r2(st['correlation'][n])} | " + ("none within tolerance | – | – | –" if c is None else
-                         f"{'>' if c['above'] else '<'} {c['threshold']:.4f} | {c['error']:.4f} | {c['seconds']:.3f} | {100 * c['stepped_up']:.0f} %")
+                         f"{'>' if c['above'] else '<'} {c['threshold']:.4f} | {c['error']:.4f} | {c['seconds']:.3f} | "
+                         f"{100 * c['stepped_up']:.0f} %")
                          + " |")
         ch = st["chosen"]
         lines.append(f"| {st['from']} → {st['to']} | **chosen**: "

@@ -1,4 +1,5 @@
-"""Speed against accuracy, --model auto, stability, and confidence: the figures of ``docs/benchmarks.md`` and ``docs/stability.md``.
+"""Speed against accuracy, --model auto, stability, and confidence: the figures of ``docs/benchmarks.md``
+and ``docs/stability.md``.
 
     python -m export.studies.benchmark                 # everything (minutes on 2 cores), into docs/
     python -m export.studies.benchmark --limit 2       # a smoke run on 2 samples of each set
@@ -24,7 +25,8 @@ baseline, each installed tier, ``--model auto``) it measures, in one run:
   capture`` does it, without file input/output).
 
 It scores colour fidelity on the real photos (:mod:`export.studies.colour`: the diffuse map's hue and
-saturation against the photo's, highlight excluded). It then runs the auto evidence (:func:`export.studies.auto_calibration.evidence`: the shipped
+saturation against the photo's, highlight excluded). It then runs the auto evidence
+(:func:`export.studies.auto_calibration.evidence`: the shipped
 rule against each tier on Des19, ``card_blue_9lights`` and the real photos,
 with time per photo measured on those photos; then auto's calibration again,
 to show it reproduces the shipped rule), the stability suite
@@ -216,7 +218,8 @@ def pareto_figure(rows, path, big=2048):
         short = np.log10(hi / lo) < 1.5  # an axis under two decades: its minor ticks labelled at 2 and 5 only
         ax.xaxis.set_minor_formatter(matplotlib.ticker.FuncFormatter(
             lambda v, _, short=short: f"{v:g}" if short and round(v / 10 ** np.floor(np.log10(v))) in (2, 5) else ""))
-        ax.set_xlabel(f"seconds per image at {tkey[2:]}² ({'network input to maps' if tkey == 's_256' else 'crop to upsampled maps'})")
+        what = "network input to maps" if tkey == "s_256" else "crop to upsampled maps"
+        ax.set_xlabel(f"seconds per image at {tkey[2:]}² ({what})")
         ax.set_ylabel("RMSE (lower is better)")
         ax.set_title(title, fontsize=10)
         ax.grid(alpha=0.3, which="both")

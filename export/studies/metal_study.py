@@ -193,7 +193,8 @@ def study(log=print, model_dir=None):
         metal = gt > DES19_METAL
         log(f"network {network.name} on Des19: mean F0 {f0[~metal].min():.3f}-{f0[~metal].max():.3f} on the "
             f"{int((~metal).sum())} dielectrics, {f0[metal].min():.3f}-{f0[metal].max():.3f} on the {int(metal.sum())} "
-            f"metals | |F0 error| {np.abs(gt - f0).mean():.4f} (F0 = 0.04 everywhere: {np.abs(gt - cv.DIELECTRIC_F0).mean():.4f})")
+            f"metals | |F0 error| {np.abs(gt - f0).mean():.4f} "
+            f"(F0 = 0.04 everywhere: {np.abs(gt - cv.DIELECTRIC_F0).mean():.4f})")
     from svbrdf_cli.ingest import photo as ingest
     from svbrdf_cli.infer import exposure
     from svbrdf_cli.rectify import crops as rectify

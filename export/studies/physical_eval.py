@@ -22,7 +22,6 @@ import click
 import numpy as np
 
 from svbrdf_cli import conventions as cv
-from svbrdf_cli.infer import physical
 
 
 def fit_flash(des19, log=print):

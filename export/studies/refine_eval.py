@@ -112,7 +112,8 @@ def des19(method, samples, des19_dir, out):
 
 def capture_seconds(model, refine_n, repeat, size=1024):
     """Median wall time of ``svbrdf capture`` on the bundled sample (a fresh process each run)."""
-    sample = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "examples", "glazed_tiles.jpg")
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    sample = os.path.join(root, "examples", "glazed_tiles.jpg")
     times = []
     for _ in range(repeat):
         with tempfile.TemporaryDirectory() as out:

@@ -29,7 +29,7 @@ import tempfile
 
 import numpy as np
 
-from export.files import REAL_PHOTOS, real_photos
+from export.files import real_photos
 from export.studies.evaluate import score
 from export.render.brdf import render_maps
 from svbrdf_cli import conventions as cv

@@ -13,6 +13,7 @@ class SvbrdfGroup(click.Group):
     """Turns library errors into one-line messages and exit code 1."""
 
     def invoke(self, ctx):
+        """Run the command; a library error becomes one line and exit code 1."""
         try:
             return super().invoke(ctx)
         except SvbrdfError as e:

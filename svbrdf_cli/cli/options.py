@@ -42,11 +42,13 @@ light_opt = click.option(
 
 
 def bits_opt(help="PNG bit depth."):
+    """The ``--bits`` option (8 or 16-bit PNG)."""
     return click.option("--bits", type=click.Choice([str(b) for b in PNG_BITS]), default=str(PNG_BITS[0]),
                         show_default=True, help=help)
 
 
 def format_opt(help="File format of data maps (presets other than svbrdf and gltf)."):
+    """The ``--format`` option (PNG or EXR data maps)."""
     return click.option("--format", "fmt", type=click.Choice(FORMATS), default=FORMATS[0], show_default=True,
                         help=help)
 
@@ -66,6 +68,7 @@ def refuse_existing(path, force):
 
 
 def check_format(preset, fmt):
+    """Refuse ``--format exr`` for a preset that writes PNG only (a usage error)."""
     if fmt != "png" and preset in PNG_ONLY_PRESETS:
         raise click.UsageError(f"The {preset} preset writes PNG only; drop --format {fmt}.")
 

@@ -32,25 +32,30 @@ class TerminalReport(Report):
         tqdm.write(line, file=sys.stderr)
 
     def start(self, total):
+        """Draw the photos' bar (on a terminal, for two photos or more, unless quiet)."""
         from tqdm import tqdm
 
         self.bar = tqdm(total=total, unit="photo", file=sys.stderr, dynamic_ncols=True,
                         disable=self.quiet or total < 2 or not sys.stderr.isatty())
 
     def failed(self, message):
+        """Write the error line above the bars."""
         self._write(f"error: {message}")
 
     def converted(self, photo, folder, record, seconds):
+        """Write the set's line (unless quiet)."""
         if not self.quiet:
             crop = record["crop"]
             how = crop["mode"] + (f" on the {crop['anchor']}" if crop.get("anchor") else "")
             self._write(f"{photo} -> {folder} ({record['size']}x{record['size']}, crop {how}, {seconds:.1f} s)")
 
     def advanced(self):
+        """Advance the photos' bar."""
         if self.bar is not None:
             self.bar.update(1)
 
     def refine_step(self, done, total):
+        """Advance the ``--refine`` bar (drawn on a terminal when warnings show)."""
         from tqdm import tqdm
 
         if self.refine_bar is None:
@@ -63,6 +68,7 @@ class TerminalReport(Report):
             self.refine_bar = None
 
     def finish(self):
+        """Close the bars."""
         for bar in (self.refine_bar, self.bar):
             if bar is not None:
                 bar.close()

@@ -25,11 +25,13 @@ def numbers(count, what, positive=False):
 
 
 def corners(ctx, param, value):
+    """``--corners X1,Y1,...,X4,Y4`` -> four (x, y) pixel corners."""
     parts = numbers(8, "x1,y1,...,x4,y4 in pixels")(ctx, param, value)
     return None if parts is None else tuple(zip(parts[0::2], parts[1::2]))
 
 
 def exposure(ctx, param, value):
+    """``--exposure auto|STOPS`` -> None (auto) or the stops, within the limits."""
     if value is None or value == "auto":
         return None
     try:

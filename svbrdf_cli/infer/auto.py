@@ -124,6 +124,7 @@ class AutoModel:
         self.timings, self.decision, self._used = {}, None, None
 
     def chain(self, tier):
+        """The model of ``tier``, loaded when first needed."""
         if tier not in self._chains:  # (not svbrdf_cli.infer.registry.load_model: models loads this module)
             if tier == PHYSICAL:
                 from svbrdf_cli.infer.physical import PhysicalModel
@@ -135,17 +136,21 @@ class AutoModel:
 
     @property
     def used(self):
+        """The tier whose maps the last call returned."""
         return self._used
 
     @property
     def found(self):
+        """The chosen tier's physical-estimate findings (:attr:`svbrdf_cli.infer.model.Model.found`)."""
         return self._used.found if self._used is not None else None
 
     @property
     def any_size(self):
+        """Whether the chosen tier runs at any size."""
         return self._used is not None and self._used.any_size
 
     def __call__(self, image):
+        """Maps of the encoded (H, W, 3) photo ``image`` from the cheapest tier good enough for it."""
         ladder, steps = self.rule["ladder"], self.rule["steps"]
         timings, trace = {}, []
         level, chain = 0, self.chain(ladder[0])

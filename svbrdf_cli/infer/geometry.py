@@ -13,7 +13,8 @@ points straight under the lens and under the flash), off the image centre. What 
   its inverse in surface units (:func:`svbrdf_cli.conventions.camera_height`). Without one, the
   physical estimate's flash height (the steepness of the diffuse falloff) is used.
 * **the highlight's centre** (:func:`highlight_centre`): the centroid of the brightest blob of the
-  blurred photo's weakest channel (a highlight is white, texture has a colour). With equal heights the highlight is at the mid-point of the feet, so the flash's
+  blurred photo's weakest channel (a highlight is white, texture has a colour). With equal heights the
+  highlight is at the mid-point of the feet, so the flash's
   foot is ``2 * highlight - camera``, its offset from the lens bounded by :data:`MAX_FLASH_OFFSET`.
 
 :class:`CaptureGeometry` holds the result; ``material.json`` records it under ``"geometry"``.
@@ -24,7 +25,6 @@ from __future__ import annotations
 import dataclasses
 import math
 
-import numpy as np
 
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.rectify import highlight

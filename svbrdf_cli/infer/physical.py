@@ -140,7 +140,8 @@ def flash_foot(lum, x, y, limit=0.8):
 
     Args:
         lum: (H, W) linear brightness.
-        x, y: (H, W) surface positions of the pixels (:func:`surface_grid`).
+        x: (H, W) surface x of the pixels (:func:`surface_grid`).
+        y: (H, W) surface y of the pixels.
         limit: the foot is kept within +-``limit`` (a fit on a surface with no
             visible falloff can wander).
     """
@@ -176,6 +177,7 @@ def lobe(d, height, roughness):
 
 @dataclasses.dataclass
 class Lobe:
+    """The lobe fit's result (:func:`fit_lobe`); levels are at the flash power ``geo.intensity``."""
     roughness: float
     diffuse: float       # flash power x mean diffuse luminance (the profile's floor)
     specular: float      # flash power x F0
@@ -225,7 +227,8 @@ def fit_lobe(lum, clipped, rho, geo):
 
     The surface is a dielectric, whose lobe is at most :data:`MAX_LOBE_RATIO` times its diffuse
     (F0 = 0.04 over an albedo of at least 0.02: without that bound a broad lobe and a flatter
-    falloff explain the same profile, and the fit hands the whole photo to the lobe). The photo's exposure is not assumed: the lobe's
+    falloff explain the same profile, and the fit hands the whole photo to the lobe). The photo's exposure
+    is not assumed: the lobe's
     height is fitted, only the diffuse level is read at the convention's flash power.
     """
     P = geo.intensity
@@ -560,12 +563,15 @@ class PhysicalModel:
 
     @property
     def used(self):
+        """Itself (a :class:`svbrdf_cli.infer.model.Model`)."""
         return self
 
     def describe(self):
+        """What ``material.json`` records: the method and what the estimate found."""
         return {"tier": self.tier, "method": "physical estimate (svbrdf_cli.infer.physical)", "found": self.found}
 
     def __call__(self, image):
+        """Stored maps of the encoded (H, W, 3) photo ``image``, and the fitted flash image (``flash_fit``)."""
         t0 = time.perf_counter()
         stored, self.found, fitted = estimate(image, self.geometry, with_fit=True)
         self.timings = {"physical": time.perf_counter() - t0}

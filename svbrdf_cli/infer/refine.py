@@ -151,6 +151,7 @@ FILLED = ("tilt", "diffuse", "roughness", "specular")
 
 @dataclasses.dataclass
 class Result:
+    """What :func:`refine` returns."""
     stored: dict            # refined maps, stored encoding (HWC, roughness one channel)
     report: dict            # JSON-able: iterations, photo loss before/after, intensity, seconds
 
@@ -450,7 +451,8 @@ def transfer(start, refined, target):
     estimate computed at the output size), so the change reaches the output without blurring it.
 
     Args:
-        start, refined: stored-encoding maps at the working size (before and after :func:`refine`).
+        start: stored-encoding maps at the working size, before :func:`refine`.
+        refined: the same after it.
         target: stored-encoding maps at the output size.
 
     Returns:

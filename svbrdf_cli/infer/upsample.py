@@ -31,6 +31,8 @@ def guided_upsample(low, guide_low, guide_high, radius=GUIDE_RADIUS, eps=GUIDE_E
         low: (h, w, C) map at network resolution.
         guide_low: (h, w) guide (the photo's encoded brightness) at that resolution.
         guide_high: (H, W) the same guide at the output resolution (square).
+        radius: the regression window's radius, in network pixels.
+        eps: the regularisation of the slope (in the guide's squared units).
         detail: ``guide_high`` less the guide's bicubic upsampling, if the caller has it already.
 
     Returns:

@@ -41,6 +41,7 @@ MIN_SIDE = 32
 
 @dataclasses.dataclass
 class Photo:
+    """A decoded photo: linear (H, W, 3) float32 pixels and what the file said about them."""
     linear: np.ndarray          # (H, W, 3) float32, linear, >= 0
     path: str
     kind: str                   # "raw", "encoded" or "linear"
@@ -391,7 +392,7 @@ def _repair_non_finite(path, rgb):
 
 
 def _srgb_to_linear_inplace(rgb, rows=256):
-    """sRGB decoding a few rows at a time (no full-size temporaries)."""
+    """SRGB decoding a few rows at a time (no full-size temporaries)."""
     for y in range(0, rgb.shape[0], rows):
         rgb[y:y + rows] = cv.srgb_to_linear(rgb[y:y + rows])
 

@@ -39,6 +39,7 @@ class CropError(SvbrdfError):
 
 @dataclasses.dataclass
 class Crop:
+    """A square crop of the photo: its linear (S, S, 3) float32 pixels and how it was made."""
     image: np.ndarray      # (S, S, 3) float32, linear
     report: dict           # JSON-able: mode, what was found, the source quad
 
@@ -58,7 +59,7 @@ WINDOW_CELLS = (2, 9)
 
 
 def _tag_cells():
-    """id -> (column, row) cell of the tag's top-left corner, clockwise from the top-left."""
+    """Id -> (column, row) cell of the tag's top-left corner, clockwise from the top-left."""
     top = [(c, 1) for c in _LATTICE]
     right = [(9, r) for r in _LATTICE[1:]]
     bottom = [(c, 9) for c in reversed(_LATTICE[:-1])]
@@ -73,7 +74,7 @@ def _dictionary():
 
 
 def tag_centres(cell=1.0):
-    """id -> (x, y) centre of each tag on the sheet, in units of ``cell``
+    """Id -> (x, y) centre of each tag on the sheet, in units of ``cell``
     (sheet edge coordinates: the sheet spans 0..SHEET_CELLS)."""
     return {i: ((c + 0.5) * cell, (r + 0.5) * cell) for i, (c, r) in _tag_cells().items()}
 

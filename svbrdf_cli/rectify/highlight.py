@@ -24,6 +24,7 @@ BLOB_LEVEL = 0.7
 
 @dataclasses.dataclass
 class Blob:
+    """The highlight's blob in a photo."""
     mask: np.ndarray     # (H, W) bool: the blob's pixels
     peak: tuple          # (row, col) of its brightest blurred pixel
     centre: tuple        # (x, y) surface position: the weighted centroid (the peak where it has no weight)

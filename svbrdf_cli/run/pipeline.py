@@ -82,6 +82,7 @@ class Options:
 # --------------------------------------------------------------------------
 
 def output_size(opts, crop_side):
+    """The output maps' side: ``--size``, else the crop's side within [MIN_SIZE, DEFAULT_SIZE]."""
     if opts.size is not None:
         return int(opts.size)
     return int(min(DEFAULT_SIZE, max(MIN_SIZE, crop_side)))

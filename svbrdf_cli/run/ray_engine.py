@@ -40,6 +40,7 @@ class ScaleError(SvbrdfError):
 
 
 def is_uri(output):
+    """Whether ``output`` is a URI (``s3://...``) rather than a local folder."""
     return "://" in os.fspath(output)
 
 
@@ -81,9 +82,11 @@ class Store:
         return self.fs.get_file_info(f"{self.root}/{rel}").type != pafs.FileType.NotFound
 
     def exists(self, stem):
+        """Whether the set ``stem`` exists in the store."""
         return self._info(stem) if self.remote else os.path.exists(os.path.join(self.output, stem))
 
     def complete(self, stem):
+        """Whether the set ``stem`` is complete in the store."""
         return self._info(f"{stem}/{pipeline.RECORD}") if self.remote else pipeline.is_complete(os.path.join(self.output, stem))
 
     def upload(self, local_folder, stem, force):
@@ -131,6 +134,7 @@ class CaptureWorker:
             return {"path": path, "folder": "", "error": describe_failure(path, e), "seconds": 0.0}
 
     def __call__(self, batch):
+        """Convert one batch of photos on this worker; a row per photo (its set or its failure)."""
         rows = [self._one(str(p)) for p in batch["path"]]
         return {k: [r[k] for r in rows] for k in ("path", "folder", "error", "seconds")}
 

@@ -386,6 +386,11 @@ def write_svbrdf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, pr
         bits: 8 or 16.
         fmt: "png" only.
         force: replace an existing folder.
+        extra: optional function of the temporary folder writing more files into it; returns their names.
+        protect: paths that must survive (the photo itself when it lies in the folder).
+        name: the material's name (unused by the native layout).
+        tileable: the maps tile (the height integration wraps).
+        ao: write ambient occlusion (unused by the native layout).
         images: more images for the set, (name, pixels or a function making them, bits, colour) each,
             encoded with the maps.
         stored: the maps already in the stored encoding (a capture's): written as they are, without
@@ -420,7 +425,7 @@ def write_svbrdf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, pr
 
 def write_gltf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, protect=(), name=None,
                  tileable=False, ao=True, images=()):
-    """glTF 2.0 metallic-roughness set plus ``material.gltf`` (one textured quad).
+    """GlTF 2.0 metallic-roughness set plus ``material.gltf`` (one textured quad).
 
     ``baseColor.png`` (sRGB), ``metallicRoughness.png`` (linear; R = 1 (no
     occlusion, so it can double as ``occlusionTexture``), G = roughness,
@@ -652,7 +657,9 @@ def gltf_document(base_colour, metallic_roughness, normal, name="material", extr
     """A glTF 2.0 JSON document: one textured quad, buffer embedded as base64.
 
     Args:
-        base_colour, metallic_roughness, normal: image URIs (relative paths).
+        base_colour: the base colour image's URI (a relative path).
+        metallic_roughness: the metallic-roughness image's URI.
+        normal: the normal map's URI.
         name: node, mesh and material name.
         extras: JSON-able dict stored as the material's ``extras``.
 

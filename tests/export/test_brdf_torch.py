@@ -16,7 +16,9 @@ def _t(x, device="cpu"):
 @pytest.mark.parametrize("device", DEVICES)
 def test_golden_table(golden, device):
     # Rows -> (M, 3, 1, 1) so the channel axis is 1.
-    col = lambda k: _t(golden[k], device)[..., None, None]
+    def col(k):
+        return _t(golden[k], device)[..., None, None]
+
     f = brdf.brdf(col("n"), col("l"), col("v"), col("diffuse"), col("roughness"), col("specular"))
     np.testing.assert_allclose(f[..., 0, 0].cpu().numpy(), golden["f"], rtol=1e-10, atol=1e-12)
 

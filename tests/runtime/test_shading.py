@@ -31,7 +31,8 @@ def test_ggx_is_normalised(alpha):
 
 def test_lambertian_radiance():
     # White Lambertian (s = 0) facing the flash: radiance = I / d^2 at the centre.
-    n = np.zeros((3, 3, 3)); n[..., 2] = 1
+    n = np.zeros((3, 3, 3))
+    n[..., 2] = 1
     img = shading.render(n, np.ones((3, 3, 3)), np.ones((3, 3, 1)), np.zeros((3, 3, 3)), intensity=2.0)
     d2 = cv.CAMERA_HEIGHT ** 2 + 0  # centre pixel sits at (0, 0)
     assert img[1, 1, 0] == pytest.approx(2.0 / d2)

@@ -332,7 +332,9 @@ def test_gltf_document_is_structurally_valid(maps, tmp_path):
     assert np.allclose(np.cross(nrm, tan[:, :3]) * tan[:, 3:], [0, 1, 0])   # bitangent +Y: OpenGL normals
 
     mat = doc["materials"][prim["material"]]
-    uri = lambda ref: doc["images"][doc["textures"][ref["index"]]["source"]]["uri"]
+    def uri(ref):
+        return doc["images"][doc["textures"][ref["index"]]["source"]]["uri"]
+
     assert uri(mat["pbrMetallicRoughness"]["baseColorTexture"]) == "baseColor.png"
     assert uri(mat["pbrMetallicRoughness"]["metallicRoughnessTexture"]) == "metallicRoughness.png"
     assert uri(mat["normalTexture"]) == "normal.png"

@@ -11,7 +11,7 @@ from svbrdf_cli.infer.exposure import NETWORK_SIZE, network_input
 from svbrdf_cli.infer.registry import load_model
 from svbrdf_cli.run import pipeline
 
-SAMPLE = os.path.join(os.path.dirname(__file__), "..", "..", "examples", "glazed_tiles.jpg")
+SAMPLE = os.path.join(os.path.dirname(__file__), "..", "..", "..", "examples", "glazed_tiles.jpg")
 
 
 @pytest.fixture

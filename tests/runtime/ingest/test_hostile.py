@@ -19,7 +19,7 @@ import zlib
 import numpy as np
 import pytest
 
-ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
 #: Peak memory allowed to any photo the tool accepts or refuses (issue: at most 1.5 GB).
 PEAK_MB = 1536
 

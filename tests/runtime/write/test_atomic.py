@@ -16,7 +16,7 @@ from svbrdf_cli.cli.main import cli
 from svbrdf_cli.errors import ImageWriteError
 from svbrdf_cli.imageio import write_image
 
-ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
 
 
 def run(*args):

@@ -16,7 +16,7 @@ def test_a_model_is_shipped():
     assert "fast" in installed_tiers()
 
 
-ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
 BASELINES = os.path.join(ROOT, "weights", "baselines")
 
 

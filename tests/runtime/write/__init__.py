@@ -1,0 +1,1 @@
+"""Tests of svbrdf_cli.write."""
