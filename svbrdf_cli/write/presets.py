@@ -13,8 +13,8 @@ preset         files (colour space)
 =============  ==================================================================
 svbrdf         normal.png diffuse.png roughness.png specular.png: the native
                Des18 encoding, exactly these four files (benchmarks read them)
-gltf           baseColor.png (sRGB); metallicRoughness.png (linear: R = 1, i.e.
-               no occlusion, G = roughness, B = metallic); normal.png (OpenGL,
+gltf           baseColor.png (sRGB); metallicRoughness.png (linear: R = ambient
+               occlusion, G = roughness, B = metallic); normal.png (OpenGL,
                +Y up); height.png; material.gltf (one textured quad)
 unreal         T_<Name>_BC.png (sRGB); T_<Name>_N.png (DirectX: green flipped, Y down);
                T_<Name>_ORM.png (linear: R = ambient occlusion, G = roughness, B = metallic);
@@ -427,9 +427,9 @@ def write_gltf(folder, maps, *, bits=8, fmt="png", force=False, extra=None, prot
                  tileable=False, ao=True, images=()):
     """GlTF 2.0 metallic-roughness set plus ``material.gltf`` (one textured quad).
 
-    ``baseColor.png`` (sRGB), ``metallicRoughness.png`` (linear; R = 1 (no
-    occlusion, so it can double as ``occlusionTexture``), G = roughness,
-    B = metallic), ``normal.png`` (+Y up, linear), ``height.png`` (16-bit,
+    ``baseColor.png`` (sRGB), ``metallicRoughness.png`` (linear; R = ambient
+    occlusion from the height, referenced as ``occlusionTexture`` too; 1 with ``ao=False``),
+    G = roughness, B = metallic), ``normal.png`` (+Y up, linear), ``height.png`` (16-bit,
     not referenced: glTF has no displacement slot) and ``material.gltf``. glTF
     core textures are PNG/JPEG, so ``fmt`` must be "png".
 
@@ -463,8 +463,8 @@ def write_unreal(folder, maps, *, bits=8, fmt="png", force=False, extra=None, pr
     ``T_<Name>_N`` (normal, DirectX), ``T_<Name>_ORM``, ``T_<Name>_H`` (height); ``<Name>`` is ``name``
     or the folder's (:func:`asset_name`), so sets imported into one folder never collide.
 
-    ORM is linear (import with sRGB off): R = ambient occlusion (1: none
-    estimated), G = roughness, B = metallic. The normal map's green channel is
+    ORM is linear (import with sRGB off): R = ambient occlusion from the height
+    (1 with ``ao=False``), G = roughness, B = metallic. The normal map's green channel is
     flipped (Y down), as Unreal expects.
 
     Returns:
