@@ -53,7 +53,6 @@ with ``force=True`` when it is a set this tool wrote (:mod:`svbrdf_cli.write.ato
 
 from __future__ import annotations
 
-import base64
 import json
 import logging
 import os
@@ -66,6 +65,16 @@ from svbrdf_cli import conventions as cv
 from svbrdf_cli import imageio
 from svbrdf_cli.write.atomic import write_set
 from svbrdf_cli.errors import MapSetError
+from svbrdf_cli.write.derive import (
+    AO_NOTE,
+    ambient_occlusion,
+    height_to_unit,
+    normals_to_directx,
+    normals_to_height,
+    normals_to_opengl,
+    specular_to_metallic,
+)
+from svbrdf_cli.write.gltf import gltf_document
 
 log = logging.getLogger("svbrdf")
 
@@ -76,208 +85,6 @@ FORMATS = ("png", "exr")
 #: Bit depth of height maps written as PNG (8 bits shows stepping).
 HEIGHT_BITS = 16
 
-#: Rec. 601 luma weights of the "perceived brightness" in the
-#: KHR_materials_pbrSpecularGlossiness conversion sample.
-_BRIGHTNESS_WEIGHTS = (0.299, 0.587, 0.114)
-
-#: Specular brightness within this of the dielectric F0 counts as dielectric.
-#: It is about half a step of an 8-bit gamma-2.2 file near 0.04, so a stored
-#: 0.04 that rounds slightly up cannot pick the quadratic's second, metallic
-#: root for dark dielectrics (see :func:`specular_to_metallic`).
-DIELECTRIC_TOLERANCE = 1e-3
-
-#: Smallest |n_z| used when turning normals into slopes (slope <= 20).
-_MIN_NZ = 0.05
-
-
-# --------------------------------------------------------------------------
-# Conversions
-# --------------------------------------------------------------------------
-
-def _brightness(c):
-    w = np.asarray(_BRIGHTNESS_WEIGHTS, dtype=np.float64)
-    return np.sqrt((c * c * w).sum(-1, keepdims=True))
-
-
-def specular_to_metallic(diffuse, specular, tolerance=DIELECTRIC_TOLERANCE):
-    """Specular/diffuse albedos -> metallic-roughness base colour and metallic.
-
-    KHR_materials_pbrSpecularGlossiness' ``solveMetallic``, written from its
-    definition. The metallic workflow's two lobes are
-
-        specular = lerp(F0, base, m)                    (F0 = DIELECTRIC_F0)
-        c_diff   = base (1 - F0) (1 - m)
-
-    and the specular workflow's diffuse lobe is ``diffuse (1 - max(specular))``
-    (our renderer's ``d (1 - s)`` for grey specular). Working on the perceived
-    brightness ``B(c) = sqrt(0.299 r^2 + 0.587 g^2 + 0.114 b^2)`` of each
-    colour (D for diffuse, S for specular), equating the diffuse lobes gives
-    ``base (1 - m) = D'`` with ``D' = D (1 - max(specular)) / (1 - F0)``;
-    substituting ``base = D' / (1 - m)`` into the specular equation and
-    multiplying by (1 - m):
-
-        F0 m^2 + (D' + S - 2 F0) m + (F0 - S) = 0
-
-    whose larger root is the metallic value (for S > F0 the roots have
-    opposite signs, so it is the only one in [0, 1]). Below F0 the material is
-    a dielectric, m = 0. The base colour blends the two estimates
-    ``diffuse (1 - max(specular)) / (1 - F0) / (1 - m)`` (exact for
-    dielectrics) and ``(specular - F0 (1 - m)) / m`` (exact for metals) with
-    weight m^2, as the sample does.
-
-    Pure dielectrics (specular = F0) and pure metals (diffuse = 0) round-trip
-    exactly through ``diffuse = base (1 - m), specular = lerp(F0, base, m)``.
-    Dark materials are ambiguous (a dark dielectric and a dark grey metal
-    reflect alike); at S = F0 the quadratic's roots are 0 and a spurious
-    metallic one, hence ``tolerance``.
-
-    Args:
-        diffuse: (..., 3) linear diffuse albedo in [0, 1].
-        specular: (..., 3) linear specular albedo (F0) in [0, 1].
-        tolerance: specular brightness up to ``F0 + tolerance`` is dielectric.
-
-    Returns:
-        (base_colour (..., 3) linear RGB in [0, 1], metallic (..., 1) in
-        [0, 1]), float32.
-    """
-    f0 = cv.DIELECTRIC_F0
-    d = np.asarray(diffuse, dtype=np.float64)
-    s = np.asarray(specular, dtype=np.float64)
-    bd, bs = _brightness(d), _brightness(s)
-    keep = 1.0 - s.max(-1, keepdims=True)  # the specular workflow's diffuse weight
-    b = bd * keep / (1.0 - f0) + bs - 2.0 * f0
-    c = f0 - bs
-    disc = np.maximum(b * b - 4.0 * f0 * c, 0.0)
-    m = ((np.sqrt(disc) - b) / (2.0 * f0)).clip(0.0, 1.0)
-    m = np.where(bs < f0 + tolerance, 0.0, m)
-    eps = 1e-6
-    from_diffuse = d * (keep / (1.0 - f0) / np.maximum(1.0 - m, eps))
-    from_specular = (s - f0 * (1.0 - m)) / np.maximum(m, eps)
-    base = from_diffuse + (from_specular - from_diffuse) * (m * m)
-    return base.clip(0.0, 1.0).astype(np.float32), m.astype(np.float32)
-
-
-def normals_to_height(normals, tileable=False):
-    """Height field whose normals best match a normal map (Frankot-Chellappa).
-
-    The slopes are ``dh/dx = -n_x / n_z`` and ``dh/dy = -n_y / n_z`` in
-    surface units; the surface spans ``2 * SURFACE_HALF_SIZE`` units across
-    the image width (square pixels) and row 0 is +Y, so
-    ``dh/drow = -dh/dy * pixel``. The least-squares integrable surface is
-    found in the Fourier domain (Frankot & Chellappa 1988):
-    ``H = -j (wx Gx + wy Gy) / (wx^2 + wy^2)``, mean height 0.
-
-    The FFT treats the map as periodic. A map that does not tile would wrap
-    its left/right and top/bottom slope mismatch into a tilt; unless
-    ``tileable``, the slope field is mirrored to twice the size first (slopes
-    change sign in the mirrored copies), which is periodic by construction.
-
-    Args:
-        normals: (H, W, 3) unit normals, +Y up (OpenGL).
-        tileable: the map tiles; integrate it as periodic without mirroring.
-
-    Returns:
-        (H, W) float32 heights in surface units (mean 0 over the integrated
-        domain).
-    """
-    n = np.asarray(normals, dtype=np.float64)
-    h, w = n.shape[:2]
-    pixel = 2.0 * cv.SURFACE_HALF_SIZE / w
-    nz = np.maximum(n[..., 2], _MIN_NZ)
-    # float32 halves the FFT memory on numpy >= 2 (a 4096^2 map is mirrored to 8192^2).
-    g_col = (-n[..., 0] / nz * pixel).astype(np.float32)   # dh per column step (+x)
-    g_row = (n[..., 1] / nz * pixel).astype(np.float32)    # dh per row step (-y)
-    if not tileable:
-        g_col = np.concatenate([g_col, -g_col[:, ::-1]], 1)
-        g_col = np.concatenate([g_col, g_col[::-1]], 0)
-        g_row = np.concatenate([g_row, g_row[:, ::-1]], 1)
-        g_row = np.concatenate([g_row, -g_row[::-1]], 0)
-    rows, cols = g_col.shape
-    wx = (2.0 * np.pi * np.fft.rfftfreq(cols)[None, :]).astype(np.float32)
-    wy = (2.0 * np.pi * np.fft.fftfreq(rows)[:, None]).astype(np.float32)
-    gx, gy = np.fft.rfft2(g_col), np.fft.rfft2(g_row)
-    denom = wx * wx + wy * wy
-    denom[0, 0] = 1.0
-    spectrum = -1j * (wx * gx + wy * gy) / denom
-    spectrum[0, 0] = 0.0
-    height = np.fft.irfft2(spectrum, s=(rows, cols))
-    return height[:h, :w].astype(np.float32)
-
-
-#: Ambient occlusion: horizon search in this many directions, out to these distances (pixels of a
-#: 1024 px map: the same share of any map's width), on the map at most AO_MAX_SIDE px (then resized).
-AO_DIRECTIONS = 8
-AO_STEPS = (1, 2, 4, 8, 16, 32)
-AO_MAX_SIDE = 512
-AO_NOTE = ("horizon-based, from the integrated height: 1 - mean over 8 directions of the sine of the highest "
-           "horizon within 32/1024 of the width")
-
-
-def ambient_occlusion(height, pixel, tileable=False):
-    """(H, W) ambient occlusion in [0, 1] of a height field (surface units, ``pixel`` wide pixels).
-
-    For each of :data:`AO_DIRECTIONS` directions, the highest horizon within :data:`AO_STEPS` pixels
-    (elevation angle of the neighbour's height over its distance) above the local tangent plane; the
-    unoccluded fraction is 1 minus the mean difference of their sines (1 on any plane, tilted or
-    not; lower in grooves and pores). Borders repeat
-    the edge (or wrap, for a ``tileable`` map).
-    """
-    import cv2
-
-    h, w = height.shape
-    scale = min(1.0, AO_MAX_SIDE / max(h, w))
-    hf = np.asarray(height, np.float32)
-    if scale < 1.0:
-        hf = cv2.resize(hf, (max(1, round(w * scale)), max(1, round(h * scale))), interpolation=cv2.INTER_AREA)
-    px = pixel / scale
-    hh, ww = hf.shape
-    steps = sorted({max(1, round(d * max(hh, ww) / 1024)) for d in AO_STEPS})  # the same share of any map
-    r = max(steps)
-    # beyond the border: the wrapped map when it tiles, else nothing (NaN neighbours are ignored)
-    padded = np.pad(hf, r, mode="wrap") if tileable else np.pad(hf, r, constant_values=np.nan)
-    gy, gx = np.gradient(hf, px)  # the local slope: horizons are measured above the tangent plane
-    occl = np.zeros_like(hf)
-    for k in range(AO_DIRECTIONS):
-        a = 2 * np.pi * k / AO_DIRECTIONS
-        tangent = gx * np.cos(a) + gy * np.sin(a)  # tan of the tangent plane's elevation that way
-        best = tangent.copy()
-        for d in steps:
-            dy, dx = int(round(d * np.sin(a))), int(round(d * np.cos(a)))
-            nb = padded[r + dy:r + dy + hh, r + dx:r + dx + ww]
-            best = np.fmax(best, (nb - hf) / (np.hypot(dx, dy) * px))  # tan of the horizon's elevation
-        sin = lambda t: t / np.sqrt(1.0 + t * t)  # noqa: E731
-        occl += sin(best) - sin(tangent)
-    ao = 1.0 - occl / AO_DIRECTIONS
-    if scale < 1.0:
-        ao = cv2.resize(ao, (w, h), interpolation=cv2.INTER_LINEAR)
-    return np.clip(ao, 0.0, 1.0).astype(np.float32)
-
-
-def height_to_unit(height):
-    """Heights -> ([0, 1] map, depth): ``height = map * depth + offset``.
-
-    Args:
-        height: (H, W) heights in surface units.
-
-    Returns:
-        ((H, W) float32 in [0, 1], depth in surface units per full [0, 1]
-        swing). A flat field gives 0.5 everywhere and depth 0.
-    """
-    lo, hi = float(height.min()), float(height.max())
-    if hi - lo < 1e-12:
-        return np.full(height.shape, 0.5, np.float32), 0.0
-    return ((height - lo) / (hi - lo)).astype(np.float32), hi - lo
-
-
-def normals_to_opengl(normals):
-    """Unit normals -> OpenGL (+Y up) normal-map pixels in [0, 1]."""
-    return cv.encode_normals(np.asarray(normals, dtype=np.float32))
-
-
-def normals_to_directx(normals):
-    """Unit normals -> DirectX (Y down, green flipped) normal-map pixels in [0, 1]."""
-    flip = np.array([1.0, -1.0, 1.0], dtype=np.float32)
-    return cv.encode_normals(np.asarray(normals, dtype=np.float32) * flip)
 
 
 # --------------------------------------------------------------------------
@@ -620,92 +427,3 @@ def write_preset(preset, folder, maps, stored=None, **kwargs):
 
         maps = stored_to_linear(stored)
     return writer(folder, maps, **kwargs)
-
-
-# --------------------------------------------------------------------------
-# glTF document
-# --------------------------------------------------------------------------
-
-_FLOAT, _USHORT = 5126, 5123
-_ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
-
-
-def gltf_quad():
-    """The quad's vertex data: a 2 x 2 square in the XY plane facing +Z.
-
-    glTF's UV (0, 0) is the image's top-left corner, so the top edge (y = +1)
-    gets v = 0 and the image appears upright; row 0 is +Y as in our maps. The
-    tangent (+X, w = +1) makes the bitangent cross(N, T) = +Y, matching the
-    OpenGL normal map.
-
-    Returns:
-        dict of float32 ``POSITION`` (4, 3), ``NORMAL`` (4, 3), ``TANGENT``
-        (4, 4), ``TEXCOORD_0`` (4, 2) and uint16 ``indices`` (6,)
-        (counter-clockwise seen from +Z).
-    """
-    s = cv.SURFACE_HALF_SIZE
-    pos = np.array([[-s, -s, 0], [s, -s, 0], [s, s, 0], [-s, s, 0]], np.float32)
-    uv = np.array([[0, 1], [1, 1], [1, 0], [0, 0]], np.float32)
-    return {"POSITION": pos,
-            "NORMAL": np.tile(np.array([0, 0, 1], np.float32), (4, 1)),
-            "TANGENT": np.tile(np.array([1, 0, 0, 1], np.float32), (4, 1)),
-            "TEXCOORD_0": uv,
-            "indices": np.array([0, 1, 2, 0, 2, 3], np.uint16)}
-
-
-def gltf_document(base_colour, metallic_roughness, normal, name="material", extras=None):
-    """A glTF 2.0 JSON document: one textured quad, buffer embedded as base64.
-
-    Args:
-        base_colour: the base colour image's URI (a relative path).
-        metallic_roughness: the metallic-roughness image's URI.
-        normal: the normal map's URI.
-        name: node, mesh and material name.
-        extras: JSON-able dict stored as the material's ``extras``.
-
-    Returns:
-        The document as a dict (``json.dump`` it to a ``.gltf`` file).
-    """
-    quad = gltf_quad()
-    blob, views, accessors, attributes = b"", [], [], {}
-    for key in ("POSITION", "NORMAL", "TANGENT", "TEXCOORD_0", "indices"):
-        a = quad[key]
-        data = a.astype("<u2" if key == "indices" else "<f4").tobytes()  # glTF is little-endian
-        views.append({"buffer": 0, "byteOffset": len(blob), "byteLength": len(data),
-                      "target": _ELEMENT_ARRAY_BUFFER if key == "indices" else _ARRAY_BUFFER})
-        acc = {"bufferView": len(views) - 1, "componentType": _USHORT if key == "indices" else _FLOAT,
-               "count": int(a.shape[0]),
-               "type": "SCALAR" if a.ndim == 1 else ("VEC2", "VEC3", "VEC4")[a.shape[1] - 2]}
-        if key == "POSITION":
-            acc["min"] = [float(v) for v in a.min(0)]
-            acc["max"] = [float(v) for v in a.max(0)]
-        accessors.append(acc)
-        if key != "indices":
-            attributes[key] = len(accessors) - 1
-        blob += data + b"\0" * (-len(data) % 4)  # keep every view 4-byte aligned
-    uri = "data:application/octet-stream;base64," + base64.b64encode(blob).decode("ascii")
-    material = {"name": name,
-                "pbrMetallicRoughness": {"baseColorTexture": {"index": 0},
-                                         "metallicRoughnessTexture": {"index": 1},
-                                         "metallicFactor": 1.0, "roughnessFactor": 1.0},
-                "normalTexture": {"index": 2},
-                "occlusionTexture": {"index": 1},  # R of the metallicRoughness image
-                "doubleSided": True}
-    if extras:
-        material["extras"] = extras
-    return {
-        "asset": {"version": "2.0", "generator": f"svbrdf {__version__}"},
-        "scene": 0,
-        "scenes": [{"nodes": [0]}],
-        "nodes": [{"mesh": 0, "name": name}],
-        "meshes": [{"name": name, "primitives": [{"attributes": attributes, "indices": len(accessors) - 1,
-                                                   "material": 0, "mode": 4}]}],
-        "materials": [material],
-        "textures": [{"sampler": 0, "source": i} for i in range(3)],
-        "images": [{"uri": u} for u in (base_colour, metallic_roughness, normal)],
-        "samplers": [{"magFilter": 9729, "minFilter": 9987, "wrapS": 10497, "wrapT": 10497}],
-        "buffers": [{"byteLength": len(blob), "uri": uri}],
-        "bufferViews": views,
-        "accessors": accessors,
-    }
-

@@ -9,7 +9,7 @@ import pytest
 
 from svbrdf_cli import conventions as cv
 from svbrdf_cli import imageio
-from svbrdf_cli.write import mapset
+from svbrdf_cli.write import derive, mapset
 from svbrdf_cli.write import presets
 from svbrdf_cli.errors import ImageWriteError
 from svbrdf_cli.imageio import read_image
@@ -62,7 +62,7 @@ def right(img):
 def test_solve_metallic_round_trips_pure_materials(m):
     colour = np.random.default_rng(1).uniform(0.05, 1.0, (200, 3))
     diffuse, specular = metalness_forward(colour, m)
-    base, metallic = presets.specular_to_metallic(diffuse, specular)
+    base, metallic = derive.specular_to_metallic(diffuse, specular)
     assert metallic.shape == (200, 1)
     np.testing.assert_allclose(metallic, m, atol=1e-5)
     np.testing.assert_allclose(base, colour, atol=1e-5)
@@ -74,7 +74,7 @@ def test_solve_metallic_inverts_its_forward_model_for_grey():
     m = np.linspace(0.05, 0.95, 10)[:, None]
     specular = F0 + (base - F0) * m
     diffuse = base * (1 - F0) * (1 - m) / (1 - specular.max(-1, keepdims=True))
-    b, got = presets.specular_to_metallic(diffuse, specular)
+    b, got = derive.specular_to_metallic(diffuse, specular)
     np.testing.assert_allclose(got, m, atol=1e-5)
     np.testing.assert_allclose(b, base, atol=1e-4)
 
@@ -82,8 +82,8 @@ def test_solve_metallic_inverts_its_forward_model_for_grey():
 def test_dark_dielectric_stays_dielectric_after_quantisation():
     # 0.04 stored in 8-bit gamma 2.2 and rounded up: the quadratic's other root would say "metal".
     spec = np.full((1, 3), (round(F0 ** (1 / cv.ALBEDO_GAMMA) * 255) + 0.4) / 255) ** cv.ALBEDO_GAMMA
-    assert F0 < spec[0, 0] < F0 + presets.DIELECTRIC_TOLERANCE
-    base, m = presets.specular_to_metallic(np.full((1, 3), 0.01), spec)
+    assert F0 < spec[0, 0] < F0 + derive.DIELECTRIC_TOLERANCE
+    base, m = derive.specular_to_metallic(np.full((1, 3), 0.01), spec)
     assert m[0, 0] == 0.0 and abs(base[0, 0] - 0.01) < 1e-3
 
 
@@ -109,7 +109,7 @@ def analytic_normals(n=64):
 @pytest.mark.parametrize("tileable", [True, False])
 def test_height_from_analytic_normals(tileable):
     h = periodic_height()
-    got = presets.normals_to_height(analytic_normals(), tileable=tileable)
+    got = derive.normals_to_height(analytic_normals(), tileable=tileable)
     assert got.shape == h.shape
     assert np.corrcoef(got.ravel(), h.ravel())[0, 1] > 0.99
     # the scale is right too: depth recorded for the PNG matches the true relief
@@ -122,7 +122,7 @@ def test_height_from_finite_difference_normals():
     dx = (np.roll(h, -1, 1) - np.roll(h, 1, 1)) / (2 * px)
     dy = -(np.roll(h, -1, 0) - np.roll(h, 1, 0)) / (2 * px)   # row 0 is +Y
     n = cv.normalize(np.stack([-dx, -dy, np.ones_like(h)], -1))
-    got = presets.normals_to_height(n, tileable=True)
+    got = derive.normals_to_height(n, tileable=True)
     assert np.corrcoef(got.ravel(), h.ravel())[0, 1] > 0.99
 
 
@@ -133,13 +133,13 @@ def test_height_of_a_non_tileable_ramp_and_bump():
     dx = 0.05 * np.exp(-((x - 0.3) ** 2 + y ** 2) / 0.1) * (-2 * (x - 0.3) / 0.1)
     dy = 0.1 + 0.05 * np.exp(-((x - 0.3) ** 2 + y ** 2) / 0.1) * (-2 * y / 0.1)
     n = cv.normalize(np.stack([-dx, -dy, np.ones_like(h)], -1))
-    got = presets.normals_to_height(n)
+    got = derive.normals_to_height(n)
     assert np.corrcoef(got.ravel(), h.ravel())[0, 1] > 0.99
     assert got[0].mean() > got[-1].mean()
 
 
 def test_flat_normals_give_mid_grey_and_zero_depth():
-    unit, depth = presets.height_to_unit(presets.normals_to_height(np.tile([0.0, 0.0, 1.0], (8, 8, 1))))
+    unit, depth = derive.height_to_unit(derive.normals_to_height(np.tile([0.0, 0.0, 1.0], (8, 8, 1))))
     assert depth == 0.0 and np.all(unit == 0.5)
 
 
@@ -422,14 +422,14 @@ def test_ambient_occlusion_darkens_grooves_only():
     n = 128
     pixel = 2.0 * cv.SURFACE_HALF_SIZE / n
     x = np.arange(n, dtype=np.float32)[None, :] * np.ones((n, 1), np.float32)
-    assert presets.ambient_occlusion(np.zeros((n, n), np.float32), pixel).min() == 1.0
-    tilted = presets.ambient_occlusion(0.01 * x * pixel * 10, pixel)
+    assert derive.ambient_occlusion(np.zeros((n, n), np.float32), pixel).min() == 1.0
+    tilted = derive.ambient_occlusion(0.01 * x * pixel * 10, pixel)
     assert tilted.min() > 0.98
     groove = np.zeros((n, n), np.float32)
     groove[:, 62:66] = -0.05  # a trench 4 px wide, 0.05 deep (surface units)
-    ao = presets.ambient_occlusion(groove, pixel)
+    ao = derive.ambient_occlusion(groove, pixel)
     assert ao[:, 62:66].mean() < 0.8 and ao[:, :40].min() > 0.99 and 0 <= ao.min()
-    wrapped = presets.ambient_occlusion(np.roll(groove, 64, axis=1), pixel, tileable=True)
+    wrapped = derive.ambient_occlusion(np.roll(groove, 64, axis=1), pixel, tileable=True)
     np.testing.assert_allclose(np.roll(wrapped, -64, axis=1)[8:-8], ao[8:-8], atol=1e-5)  # (rows near the
     # border differ: beyond it the wrapped map continues the groove, the other has nothing)
 
