@@ -80,10 +80,8 @@ DETAIL_RANGE = 1.5
 SUBTRACT_FLOOR = 0.25
 #: The trend :func:`flatten_radial` divides out is a polynomial of this degree in the distance (fitted
 #: to the ring means, weighted by their pixel counts): a falloff or lobe mismatch is smooth in the
-#: distance, a ring-to-ring change is the material's own. Version 5 smoothed the ring means over three
-#: rings only, and a sign in the middle of a brushed-metal plate (Des18's IMG_20180115_143924) came out
-#: with concentric rings in the metal round it. Degree 4 (version 6): the rings are gone; Des19 diffuse
-#: 0.0386 either way, held-out relight 0.0583 -> 0.0582, card relight 0.1459 -> 0.1458.
+#: distance, a ring-to-ring change is the material's own (ring means smoothed over a few rings drew
+#: concentric rings into a brushed-metal plate round a sign in its middle).
 RADIAL_DEGREE = 4
 #: Encoded values at or above this (times the photo's clip level) are clipped.
 CLIPPED = cv.CLIPPED

@@ -46,10 +46,9 @@ from svbrdf_cli import imageops
 from svbrdf_cli.imageops import luminance
 from svbrdf_cli import shading
 
-#: Iterations of ``--refine`` given without a number (and of ``svbrdf capture`` without ``--refine``).
-#: 60 steps fit as well as 150 (``python -m export.studies.refine_eval --methods physical --iterations N
-#: --repeat 0``, session 9: card relight 0.1320 against 0.1316, Des19 maps and held-out relight within
-#: 0.3 %) in 1.25 s instead of 3.17 s at 256²; the fit has converged long before.
+#: Iterations of ``--refine`` given without a number (and of ``svbrdf capture`` without ``--refine``):
+#: 60 steps fit as well as 150, within 0.3 % on every measure of ``docs/capture.md``'s table, in 40 %
+#: of the time.
 DEFAULT_ITERATIONS = 60
 #: The most ``--refine`` accepts.
 MAX_ITERATIONS = 5000
@@ -74,15 +73,10 @@ ENCODED_FLOOR = 1e-3
 class Priors:
     """Weights of the prior terms (each a mean over pixels, like the photo term).
 
-    Session 10 (``python -m export.studies.refine_eval --methods physical --repeat 0``, and the held-out
-    relighting of 32 generated photos, a set that is neither the card nor Des19): the dielectric prior
-    now holds F0's luminance only, and the closeness of diffuse (0.2 -> 0.05), specular (2 -> 1) and
-    the smoothness of roughness (2 -> 0.5) are weaker. Measured against the session-9 weights: card
-    relight 0.1335 -> 0.1230 (physical estimate without refinement: 0.1458), generated photos' relight
-    gain over the estimate -0.5 % -> -2.5 %, Des19 held-out relight 0.0574 -> 0.0574, maps normal
-    0.0586, diffuse 0.0385 -> 0.0391, roughness 0.1935 -> 0.1936, specular 0.0590 -> 0.0607. A weaker
-    broad-tilt prior (``up_broad``) relit the card a little better still but left a stronger disc of
-    tilted normals round the flash on real photos, so it stays.
+    Chosen on the held-out relighting of ``card_blue_9lights``, Des19 and 32 generated photos
+    (``python -m export.studies.refine_eval --methods physical --repeat 0 --generated 32 --prior
+    NAME=VALUE`` tries a weight); a weaker ``up_broad`` relights the card a little better but leaves a
+    disc of tilted normals round the flash on real photos.
     """
 
     diffuse: float = 0.05            # ((d - d0) / (d0 + 0.05))^2: relative
@@ -93,9 +87,8 @@ class Priors:
     up_broad: float = 10.0           # |tilt blurred over BROAD_SIGMA|^2: no tilt of whole regions
     #: (luminance(s) - 0.04)^2: a dielectric's F0 *level*. Its colour is left to the closeness prior and
     #: to :func:`_spec_change` (grey plus the diffuse's own colour): a coloured foil or anodised metal
-    #: reflects in its own colour, and a grey F0 pulled onto it whitens every highlight (on
-    #: card_blue_9lights' teal and gold foil scales the relit renders came out pale, red channel +0.09
-    #: encoded on average). Per channel (session 9): card 0.1335; on the luminance: 0.1282.
+    #: reflects in its own colour, and a grey F0 pulled onto it whitens every highlight (the teal and
+    #: gold foil scales of card_blue_9lights relit pale).
     dielectric: float = 5.0
     smooth_roughness: float = 0.5    # squared neighbour differences (at the full size)
     smooth_specular: float = 2.0
@@ -110,15 +103,9 @@ SPECULAR_RANGE = (0.0, 1.0)
 #: pixel, so its spatial variation and tint stay). Almost every surface reflects at least that much
 #: (water, 0.02, is the rare exception); a fit that lowers the whole map is explaining something else
 #: (the global intensity fitted at the start, a highlight spread by relief the flat start lacks),
-#: while its variation from pixel to pixel is the photo's evidence. Measured (``python -m
-#: export.studies.refine_eval --methods physical --repeat 0``; physical estimate without refinement: Des19
-#: specular 0.0587, card relight 0.1459):
-#:
-#: * no floor: the fit lowered F0 on 27 of 29 Des19 samples (means 0.031-0.038, the lowest on metals
-#:   whose true F0 is 0.09): Des19 specular 0.0615 (+4.8 %), card 0.1294;
-#: * a floor on every pixel's F0: Des19 specular 0.0585, card 0.1392 (the card's foil scales do
-#:   reflect less than 0.04 in places: MaterialGAN's reference maps say so too);
-#: * this floor on the mean: Des19 specular 0.0591 (+0.7 %), card 0.1316 (-9.8 %).
+#: while its variation from pixel to pixel is the photo's evidence. Without a floor the fit lowered F0
+#: on 27 of the 29 Des19 samples; a floor on every pixel's F0 relit the card worse (its foil scales do
+#: reflect less than 0.04 in places).
 SPECULAR_FLOOR = cv.DIELECTRIC_F0
 #: Diffuse, roughness and F0 may change from pixel to pixel but not with the distance to the
 #: highlight: after each step their change (the diffuse's in its logarithm: a relative change) loses its
@@ -128,12 +115,9 @@ SPECULAR_FLOOR = cv.DIELECTRIC_F0
 #: the start's lobe, its clipped core left out) or the lens's vignetting and the flash's beam, and
 #: leaves a disc round the flash, or dark edges that show as a grid when the texture tiles.
 RADIAL_RINGS = 16
-#: The maps whose change loses its radial trend. The diffuse since session 13:
-#: on the 12 real benchmark photos (``svbrdf capture --size 512``) the fit had made the diffuse's edges
-#: darker than its centre by a median 10 % (log-brightness of the outer rings against the inner ones;
-#: the estimate's own: 4 %), now 4 %; the spread of its ring means fell from 0.052 to 0.044 (estimate
-#: 0.037). Cost on the synthetic sets, which have neither vignetting nor a beam: Des19 diffuse 0.0390 ->
-#: 0.0394, card relight 0.1217 -> 0.1224, 32 generated photos' relight 0.0771 -> 0.0775.
+#: The maps whose change loses its radial trend. Free of it, the fit made the diffuse's edges darker
+#: than its centre by a median 10 % on the 12 real benchmark photos (the estimate's own: 4 %): the
+#: lens's vignetting, which the synthetic sets do not have.
 RADIAL_FREE = ("diffuse", "roughness", "specular")
 TILT_LIMIT = 3.0  # 72 degrees
 #: Where the photo clipped (no photo term), the fit's change to diffuse, roughness and F0 is taken
@@ -141,11 +125,9 @@ TILT_LIMIT = 3.0  # 72 degrees
 #: priors hold there: the change is the photo's evidence about the material (a glossier tile, a
 #: brighter diffuse), and the clipped disc is the same material. Without it the bundled sample's
 #: F0 showed a dark disc at the clipped highlight inside a ring that had moved (:func:`_fill_unobserved`).
-#: The parameters :func:`_fill_unobserved` fills. The tilt since session 13: held at the start's inside the
-#: clipped region while the fit tilted the normals round it, it drew the region's ragged outline into
-#: every relit render of the highlight (the red lacquer and a varnished wood of the real benchmark
-#: photos; blurring the normal map alone took the outline away). Card 0.1221 either way, 32 generated
-#: photos' relight 0.0771 -> 0.0762, Des19 normal 0.0586 -> 0.0587 and held-out relight 0.0574 -> 0.0575.
+#: The parameters :func:`_fill_unobserved` fills. The tilt too: held at the start's inside the clipped
+#: region while the fit tilted the normals round it, it drew the region's ragged outline into every
+#: relit render of the highlight.
 FILLED = ("tilt", "diffuse", "roughness", "specular")
 
 
