@@ -201,7 +201,9 @@ def evidence(rule, des19, nine=None, real=(), chains=None, log=print):
     :class:`export.studies.benchmark.NineLights` or None; ``real``: network inputs
     without ground truth (cost and tiers only).
     """
-    auto = auto_tier.AutoModel(rule, chains=chains)
+    from svbrdf_cli.infer.registry import load_model
+
+    auto = auto_tier.AutoModel(load_model, rule, chains=chains)
     models = {t: auto.chain(t) for t in rule["ladder"]}
     models["auto"] = auto
     for m in models.values():  # warm up every session once, outside the timings

@@ -78,8 +78,9 @@ class Auto:
 
     def __init__(self, rule, threads=0):
         from svbrdf_cli.infer.auto import AutoModel
+        from svbrdf_cli.infer.registry import load_model
 
-        self.model = AutoModel(rule, threads=threads)
+        self.model = AutoModel(load_model, rule, threads=threads)
 
     def __call__(self, image):
         out = self.model(image)

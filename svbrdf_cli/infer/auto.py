@@ -28,13 +28,11 @@ import time
 import numpy as np
 
 from svbrdf_cli import conventions as cv
-from svbrdf_cli.infer.chain import MODELS_DIR, Chain, ModelError, installed_tiers
+from svbrdf_cli.infer.chain import MODELS_DIR, ModelError, installed_tiers
+from svbrdf_cli.infer.physical import NAME as PHYSICAL
 
 #: Where the calibrated rule is shipped.
 RULE_FILE = os.path.join(MODELS_DIR, "auto.json")
-#: The ladder's first rung: the physical estimate, which needs no model file (the name
-#: ``svbrdf_cli.infer.registry.PHYSICAL`` gives it; ``models`` loads this module, so it is not imported here).
-PHYSICAL = "physical"
 
 
 def available_tiers():
@@ -111,12 +109,20 @@ def decide(rule, values):
 
 
 class AutoModel:
-    """Called like :class:`svbrdf_cli.infer.chain.Chain`; after each call ``used`` is the chain whose maps
-    it returned and ``decision`` says why."""
+    """A :class:`svbrdf_cli.infer.model.Model`; after each call ``used`` is the tier's model whose maps
+    it returned and ``decision`` says why.
+
+    Args:
+        load: ``load(tier, threads=...)`` -> the tier's model (:func:`svbrdf_cli.infer.registry.load_model`).
+        rule: the ladder (default: the shipped :data:`RULE_FILE`).
+        threads: onnxruntime threads of each network.
+        chains: {tier: model} already loaded.
+    """
 
     tier = "auto"
 
-    def __init__(self, rule=None, threads=0, chains=None):
+    def __init__(self, load, rule=None, threads=0, chains=None):
+        self.load = load
         self.rule = rule if rule is not None else load_rule()
         self.threads = threads
         self.folder = MODELS_DIR
@@ -125,13 +131,8 @@ class AutoModel:
 
     def chain(self, tier):
         """The model of ``tier``, loaded when first needed."""
-        if tier not in self._chains:  # (not svbrdf_cli.infer.registry.load_model: models loads this module)
-            if tier == PHYSICAL:
-                from svbrdf_cli.infer.physical import PhysicalModel
-
-                self._chains[tier] = PhysicalModel()
-            else:
-                self._chains[tier] = Chain(os.path.join(MODELS_DIR, tier), threads=self.threads)
+        if tier not in self._chains:
+            self._chains[tier] = self.load(tier, threads=self.threads)
         return self._chains[tier]
 
     @property

@@ -546,10 +546,14 @@ def network_input(image):
     return np.concatenate([stored[k] for k in cv.MAP_NAMES], -1), found
 
 
+#: The ``--model`` name of the physical estimate (it needs no model file).
+NAME = "physical"
+
+
 class PhysicalModel:
     """``--model physical``: :func:`estimate` as a :class:`svbrdf_cli.infer.model.Model`."""
 
-    tier = "physical"
+    tier = NAME
     stages = ()
     #: Runs at any image size (the capture runs it again at the output size instead of upsampling).
     any_size = True

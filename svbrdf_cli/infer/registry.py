@@ -12,9 +12,7 @@ from __future__ import annotations
 import os
 
 from svbrdf_cli.infer.chain import MODELS_DIR, TIERS, Chain, ModelError, installed_tiers
-
-#: ``--model physical``: the maps computed from the flash physics alone (:mod:`svbrdf_cli.infer.physical`).
-PHYSICAL = "physical"
+from svbrdf_cli.infer.physical import NAME as PHYSICAL
 #: What ``svbrdf capture`` runs without ``--model``: the physical estimate, until a trained
 #: model beats it on Des19 (every map) and on the real 9-light card (docs/benchmarks.md).
 DEFAULT_MODEL = PHYSICAL
@@ -43,7 +41,7 @@ def load_model(model, threads=0):
     if model == AUTO:
         from svbrdf_cli.infer.auto import AutoModel
 
-        return AutoModel(threads=threads)
+        return AutoModel(load_model, threads=threads)
     if model == PHYSICAL:
         from svbrdf_cli.infer.physical import PhysicalModel
 

@@ -10,6 +10,7 @@ from click.testing import CliRunner
 from svbrdf_cli.infer import auto as auto_tier
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.infer.chain import ModelError, installed_tiers
+from svbrdf_cli.infer.registry import load_model
 
 LADDER = [t for t in ("lite", "fast") if t in installed_tiers()]
 needs_two = pytest.mark.skipif(len(LADDER) < 2, reason="auto needs the lite and fast tiers installed")
@@ -43,7 +44,7 @@ def _photo(seed=0, size=64):
 @pytest.mark.parametrize("threshold,chosen", [(None, 0), (-1.0, 1)])
 def test_auto_returns_exactly_the_chosen_tiers_maps(threshold, chosen):
     rule = {"ladder": LADDER, "steps": [{"signal": "contrast", "threshold": threshold, "above": True}]}
-    auto = auto_tier.AutoModel(rule, threads=1)
+    auto = auto_tier.AutoModel(load_model, rule, threads=1)
     img = _photo()
     out = auto(img)
     tier = LADDER[chosen]
@@ -64,7 +65,8 @@ def test_auto_returns_exactly_the_chosen_tiers_maps(threshold, chosen):
 @needs_two
 @pytest.mark.parametrize("name", list(auto_tier.SIGNALS))
 def test_signals_are_finite_numbers(name):
-    chain = auto_tier.AutoModel({"ladder": LADDER, "steps": [{"signal": name, "threshold": None}]}, threads=1).chain(LADDER[0])
+    rule = {"ladder": LADDER, "steps": [{"signal": name, "threshold": None}]}
+    chain = auto_tier.AutoModel(load_model, rule, threads=1).chain(LADDER[0])
     img = _photo(1)
     maps = chain(img)
     v = auto_tier.signal(name, img, {k: maps[k] for k in cv.MAP_NAMES}, chain)
@@ -116,7 +118,7 @@ def test_the_ladder_starts_with_the_physical_estimate(threshold, chosen, tmp_pat
     p = tmp_path / "auto.json"
     p.write_text(json.dumps(rule))
     assert auto_tier.load_rule(str(p))["ladder"][0] == "physical"  # needs no model file
-    auto = auto_tier.AutoModel(rule, threads=1)
+    auto = auto_tier.AutoModel(load_model, rule, threads=1)
     img = _photo(3)
     out = auto(img)
     ref = (PhysicalModel() if chosen == 0 else auto.chain(rule["ladder"][1]))(img)
