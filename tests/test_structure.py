@@ -172,3 +172,23 @@ def test_no_module_uses_another_modules_private_names():
     _, modules = _graph()
     bad = [f"{m}: {u}" for m, p in modules.items() for u in _private_uses(p, modules)]
     assert not bad, "private names used across modules:\n" + "\n".join(sorted(bad))
+
+
+def test_the_runtime_wheel_holds_the_runtime_and_no_torch():
+    """``pip install .`` installs the packages pyproject's ``packages.find`` names: ``svbrdf_cli``'s
+    alone, none of whose modules imports torch (the training package runs from a checkout)."""
+    import fnmatch
+    import re
+
+    from setuptools import find_packages
+
+    with open(os.path.join(ROOT, "pyproject.toml"), encoding="utf-8") as f:
+        text = f.read()
+    include = re.search(r"\[tool\.setuptools\.packages\.find\][^\[]*?include\s*=\s*\[([^\]]*)\]", text, re.S)
+    patterns = re.findall(r'"([^"]+)"', include.group(1))
+    packages = [p for p in find_packages(ROOT) if any(fnmatch.fnmatch(p, pat) for pat in patterns)]
+    assert packages and all(p == "svbrdf_cli" or p.startswith("svbrdf_cli.") for p in packages), packages
+    _, modules = _graph()
+    torch_users = [m for m, path in modules.items() if m.rpartition(".")[0] in packages or m in packages
+                   for i in _imports(path, m, modules) if i == "torch" or i.startswith("torch.")]
+    assert not torch_users, torch_users
