@@ -13,11 +13,12 @@ validation resolution; they were trained on 128 px crops, see each model's
 estimate) runs again at the output size, and ``--refine``'s change, found at
 :data:`NETWORK_SIZE`, is carried over to it (:func:`svbrdf_cli.infer.refine.transfer`).
 A network's larger outputs are made by *guided upsampling*
-(:func:`guided_upsample`): the normal and diffuse maps are regressed locally
-on the photo's brightness at network resolution, and the full-resolution
-photo's fine detail (grain, scratches, pores) is added to their bicubic
-upsampling in that proportion. ``docs/capture.md`` has the measured cost and
-quality against plain bicubic upsampling.
+(:mod:`svbrdf_cli.infer.upsample`).
+
+The stages: :mod:`svbrdf_cli.ingest` (the photo read once), :mod:`svbrdf_cli.rectify` (the crop),
+:mod:`svbrdf_cli.infer` (exposure, the model, ``--refine``, upsampling), :mod:`svbrdf_cli.write`
+(the preview and the preset's files). Progress is reported through the ``progress`` callback; this
+module draws nothing.
 """
 
 from __future__ import annotations
