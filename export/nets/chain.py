@@ -96,7 +96,7 @@ def physical_input(photo):
     from svbrdf_cli.infer.physical import network_input
 
     arr = photo.detach().float().permute(0, 2, 3, 1).cpu().numpy()
-    return torch.from_numpy(np.stack([network_input(a) for a in arr])).permute(0, 3, 1, 2).to(photo)
+    return torch.from_numpy(np.stack([network_input(a)[0] for a in arr])).permute(0, 3, 1, 2).to(photo)
 
 
 def refined_maps(physical, correction):

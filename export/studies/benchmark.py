@@ -50,7 +50,7 @@ from export.studies import methods as method_zoo
 from export.studies.auto_calibration import CALIBRATION_SAMPLES, calibrate, calibration_table, generated
 from export.studies.auto_calibration import evidence as auto_evidence, evidence_table as auto_table
 from export.studies.evaluate import chw, fit_intensity, load_des19, relight_rmse, score, score_predictions
-from export.files import command_errors, shared_root
+from export.files import REAL_PHOTOS, command_errors, shared_root
 from export.render.brdf import render_maps
 from svbrdf_cli import conventions as cv
 from export.studies.capture_speed import median_seconds
@@ -302,7 +302,7 @@ def run(limit=None, repeat=5, figures="docs/figures", tables="docs/tables", stab
     # roughness and specular are constants) that says nothing, so the evidence is the fast chain's.
     conf_tier = tier if tier != "physical" or "fast" not in by_name else "fast"
     results["confidence"] = {"tier": conf_tier, "maps": confidence_evidence(by_name[conf_tier].chain, samples)}
-    real = stability_suite.real_crops(root / "real", limit or stability_suite.REAL_PHOTOS) if os.path.isdir(root / "real") else []
+    real = stability_suite.real_crops(root / "real", limit or REAL_PHOTOS) if os.path.isdir(root / "real") else []
     real_inputs = [(name, network_input(lin)) for name, lin in real]  # once, for colour and auto
     from export.studies import colour
 

@@ -116,11 +116,11 @@ def cli(tables):
     """Colour fidelity of every runnable method on the benchmark's real photos."""
     from export.studies import methods as method_zoo
     from export.studies import stability
-    from export.files import shared_root
+    from export.files import REAL_PHOTOS, shared_root
 
     from svbrdf_cli.infer.exposure import network_input
 
-    real = stability.real_crops(shared_root() / "data" / "real", stability.REAL_PHOTOS)
+    real = stability.real_crops(shared_root() / "data" / "real", REAL_PHOTOS)
     res = evaluate(method_zoo.available(), [(name, network_input(lin)) for name, lin in real], log=click.echo)
     os.makedirs(tables, exist_ok=True)
     text = table(res)

@@ -5,6 +5,7 @@ import tempfile
 
 import numpy as np
 
+from export.files import REAL_PHOTOS
 from export.studies import colour
 from export.studies import methods
 
@@ -31,10 +32,10 @@ def test_physical_keeps_the_colour_of_the_real_photos(shared_data):
 
     from svbrdf_cli.infer.exposure import network_input
 
-    real = stability.real_crops(shared_data / "real", stability.REAL_PHOTOS)
+    real = stability.real_crops(shared_data / "real", REAL_PHOTOS)
     inputs = [(name, network_input(lin)) for name, lin in real]
     rows = colour.evaluate([methods.Physical()], inputs, log=lambda *a: None)["physical"]
-    assert len(rows) == stability.REAL_PHOTOS
+    assert len(rows) == REAL_PHOTOS
     assert all(r["ok"] is not False for r in rows), [r for r in rows if r["ok"] is False]
 
 
