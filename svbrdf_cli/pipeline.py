@@ -35,7 +35,7 @@ import numpy as np
 
 from svbrdf_cli import __version__
 from svbrdf_cli import conventions as cv
-from svbrdf_cli import ingest, rectify
+from svbrdf_cli import ingest, ownership, rectify
 from svbrdf_cli.errors import SvbrdfError
 from svbrdf_cli.refine import DEFAULT_ITERATIONS as DEFAULT_REFINE
 
@@ -458,8 +458,7 @@ def _write_set(path, folder, opts, record, timings, stored, maps, net_in, out, c
                 write_image(os.path.join(tmp, "debug", f"{k}.png"), v)
                 names.append(f"debug/{k}.png")
         timings["write"] = time.perf_counter() - t2
-        files = sorted(os.path.relpath(os.path.join(d, n), tmp).replace(os.sep, "/")
-                       for d, _, ns in os.walk(tmp) for n in ns)
+        files = ownership.files_in(tmp)  # (not the temporary folder's own marker)
         rec = dict(record, files=files + [RECORD],
                    timings_s={k: round(v, 4) for k, v in timings.items()})
         with open(os.path.join(tmp, RECORD), "w") as f:
