@@ -35,7 +35,7 @@ import numpy as np
 
 from svbrdf_cli import __version__
 from svbrdf_cli import conventions as cv
-from svbrdf_cli import ingest, ownership, rectify
+from svbrdf_cli import ingest, ownership, plausible, rectify
 from svbrdf_cli.errors import SvbrdfError
 from svbrdf_cli.refine import DEFAULT_ITERATIONS as DEFAULT_REFINE
 
@@ -96,7 +96,7 @@ def resize(image, side):
 
 def auto_exposure_gain(linear, target=cv.AUTO_EXPOSURE_MEAN):
     """Gain making the encoded image's mean ``target`` (what the networks were trained on)."""
-    lo, hi = -12.0, 12.0
+    lo, hi = -plausible.EXPOSURE_LIMIT, plausible.EXPOSURE_LIMIT
     flat = linear.reshape(-1, 3)[:: max(1, linear.size // 3 // 65536)]
     if float(flat.max()) <= 0:
         raise SvbrdfError("the crop is black")
@@ -303,6 +303,7 @@ def prepare(path, opts):
     # the auto and whole-photo crops keep the photo's short side: decode no more than the output needs
     need = (opts.size or DEFAULT_SIZE) if opts.crop in ("auto", "none") and opts.corners is None else None
     photo = ingest.load_photo(path, white_balance=opts.white_balance, min_side=need)
+    plausible.check_noise(path, photo.linear)
     t1 = time.perf_counter()
     try:
         c = rectify.crop(photo.linear, opts.crop, opts.corners)
@@ -312,10 +313,13 @@ def prepare(path, opts):
         raise rectify.CropError(f"Could not crop '{path}': the crop is only {c.image.shape[0]} px wide; "
                                 "use a larger region or a sharper photo.")
     small = resize(c.image, NETWORK_SIZE)
+    plausible.check_crop(path, photo.linear, c.image)
     try:
         gain = opts.exposure if opts.exposure is not None else auto_exposure_gain(small)
     except SvbrdfError as e:
         raise SvbrdfError(f"Could not expose '{path}': {e}; crop a part the flash lights (--corners).") from None
+    if opts.exposure is None:
+        plausible.check_exposure(path, gain)
     t2 = time.perf_counter()
     return Prepared(os.fspath(path), photo, c, small, float(gain), {"read": t1 - t0, "crop": t2 - t1})
 
@@ -391,6 +395,7 @@ def infer_set(prepared, chain, out_root, opts, model_name="fast"):
     for k, v in stored.items():
         if not np.isfinite(v).all():
             raise SvbrdfError(f"The model produced non-finite values for '{p.path}' ({k}); please report this photo.")
+    plausible.check_maps(p.path, net_in, stored, chain.describe().get("found"))
     maps = None  # linear maps, made only where needed (the native preset writes the stored ones)
     if opts.tileable:
         from svbrdf_cli.mapset import linear_to_stored
@@ -412,7 +417,7 @@ def infer_set(prepared, chain, out_root, opts, model_name="fast"):
         "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         "input": {"file": os.path.abspath(p.path), "sha256": None, "kind": p.photo.kind,
                   "bits": p.photo.bits, "width": int(p.photo.linear.shape[1]), "height": int(p.photo.linear.shape[0]),
-                  "decoded_at": p.photo.scale},
+                  "decoded_at": p.photo.scale, **({"opaque_region": list(p.photo.opaque)} if p.photo.opaque else {})},
         "model": {"name": model_name, **chain.describe()},
         "crop": _jsonable(p.crop.report),
         "exposure": {"mode": "auto" if opts.exposure is None else "manual", "stops": round(p.gain_ev, 3)},

@@ -9,6 +9,7 @@ import click
 
 from svbrdf_cli import __version__
 from svbrdf_cli.cli.options import quiet_opt, set_verbosity, verbose_opt
+from svbrdf_cli.decoder_output import guard_python_stderr
 from svbrdf_cli.errors import SvbrdfError
 
 
@@ -35,7 +36,7 @@ class SvbrdfGroup(click.Group):
     """Turns library errors into one-line messages and exit code 1."""
 
     def main(self, *args, **kwargs):
-        with _signals_end_the_run():
+        with _signals_end_the_run(), guard_python_stderr():  # (the decoders' fd 2 is caught: decoder_output)
             return super().main(*args, **kwargs)
 
     def invoke(self, ctx):
