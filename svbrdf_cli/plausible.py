@@ -37,7 +37,7 @@ class ImplausibleError(SvbrdfError):
 
 def _std(a, most=65536):
     flat = np.asarray(a, np.float32).reshape(-1, a.shape[-1] if a.ndim == 3 else 1)
-    flat = flat[:: max(1, len(flat) // most)]
+    flat = flat[:: max(1, len(flat) // most)].astype(np.float64)  # (float32 sums make a constant's std 1e-5)
     return float(flat.std(0).max()) if len(flat) else 0.0
 
 
