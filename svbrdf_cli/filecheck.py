@@ -137,6 +137,43 @@ def _chunk_count(w, h, tags):
     return -(-h // rows) if rows and h else 0
 
 
+#: TIFF tags that hold exactly one value (libtiff ignores such a tag with another count, and decodes
+#: wrongly without it: a Predictor ignored leaves every row as differences).
+_SINGLE_VALUED = {256: "ImageWidth", 257: "ImageLength", 259: "Compression", 262: "PhotometricInterpretation",
+                  266: "FillOrder", 274: "Orientation", 277: "SamplesPerPixel", 278: "RowsPerStrip",
+                  284: "PlanarConfiguration", 317: "Predictor", 322: "TileWidth", 323: "TileLength"}
+
+
+def tiff_problem(path):
+    """What is wrong with a TIFF-structured file's first directory or image data, or None: a tag that
+    holds one value with another count, a Predictor other than 1-3, then :func:`raw_data_problem`."""
+    f, m = _open(path)
+    try:
+        if len(m) < 8 or m[:4] not in (b"II*\0", b"MM\0*"):
+            return None
+        e = "<" if m[:2] == b"II" else ">"
+        off = struct.unpack(e + "I", m[4:8])[0]
+        if off + 2 > len(m):
+            return "its image directory lies past the end of the file"
+        n = struct.unpack(e + "H", m[off:off + 2])[0]
+        if off + 2 + 12 * n > len(m):
+            return "its image directory lies past the end of the file"
+        for i in range(n):
+            p = off + 2 + 12 * i
+            tag, typ, count = struct.unpack(e + "HHI", m[p:p + 8])
+            if tag in _SINGLE_VALUED and count != 1:
+                return f"its {_SINGLE_VALUED[tag]} tag holds {count} values instead of 1"
+            if tag == 317 and typ == 3:
+                predictor = struct.unpack(e + "H", m[p + 8:p + 10])[0]
+                if predictor not in (1, 2, 3):
+                    return f"its Predictor is {predictor} (1, 2 or 3 exist)"
+    finally:
+        if m:
+            m.close()
+        f.close()
+    return raw_data_problem(path)
+
+
 def png_problem(path):
     """What is wrong with a PNG's chunk structure, or None; and how many bytes follow its IEND chunk."""
     f, m = _open(path)

@@ -108,7 +108,7 @@ def _load_raw(path, name, min_side=None):
     and what it prints caught (a "data corrupted" refuses the file)."""
     import rawpy
 
-    problem = filecheck.raw_data_problem(name)
+    problem = filecheck.tiff_problem(name)
     if problem:
         raise ImageReadError(f"Could not decode RAW '{path}': {problem}; the file is damaged or cut short. "
                              "Copy it from the camera again.")
@@ -263,6 +263,9 @@ def _load_image(path, name, min_side=None):
                              "(iPhone: Settings > Camera > Formats > Most Compatible).")
     if kind == "png":
         _check_png(path)
+    problem = filecheck.tiff_problem(path)  # (None unless the file is TIFF-structured)
+    if problem:
+        raise ImageReadError(f"Could not read '{path}': {problem}; the file is damaged. Export it again.")
     if kind == "jpeg" and _truncated(path, kind):
         raise ImageReadError(f"Could not read '{path}': the file is truncated (its end is missing). "
                              "Copy it from the camera again.")

@@ -321,3 +321,18 @@ def test_a_png_with_a_damaged_chunk_names_the_damage(tmp_path):
     code, _, err = svbrdf("capture", "p.png", "-o", "o", *OPTIONS, cwd=tmp_path)
     assert code == 1 and len(errors(err)) == 1 and "p.png" in errors(err)[0], err
     assert "truncated data" not in err
+
+
+def test_a_tiff_whose_predictor_libtiff_would_ignore_is_refused(tmp_path):
+    """Found by the fuzzer: a Predictor tag with a wrong count is ignored by libtiff, which then decodes
+    every row as differences (a set from garbage)."""
+    from mutations import _oiio, flash
+
+    _oiio(str(tmp_path / "t.tif"), flash(80, 96))
+    data = bytearray((tmp_path / "t.tif").read_bytes())
+    entries, e = mutations.tiff_entries(bytes(data))
+    p = [p for p, tag, *_ in entries if tag == 317][0]
+    data[p + 4:p + 8] = struct.pack(e + "I", 65535)
+    (tmp_path / "t.tif").write_bytes(bytes(data))
+    code, _, err = svbrdf("capture", "t.tif", "-o", "o", *OPTIONS, cwd=tmp_path)
+    assert code == 1 and len(errors(err)) == 1 and "Predictor" in errors(err)[0], err
