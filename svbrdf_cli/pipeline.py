@@ -303,7 +303,6 @@ def prepare(path, opts):
     # the auto and whole-photo crops keep the photo's short side: decode no more than the output needs
     need = (opts.size or DEFAULT_SIZE) if opts.crop in ("auto", "none") and opts.corners is None else None
     photo = ingest.load_photo(path, white_balance=opts.white_balance, min_side=need)
-    plausible.check_noise(path, photo.linear)
     t1 = time.perf_counter()
     try:
         c = rectify.crop(photo.linear, opts.crop, opts.corners)

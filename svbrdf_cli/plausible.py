@@ -6,12 +6,11 @@ These checks look at what the pipeline made of the photo:
 
 * :func:`check_exposure`: the automatic exposure at its limit (a photo so dark or so bright that no
   gain within :data:`EXPOSURE_LIMIT` stops brings it to the networks' level);
-* :func:`check_noise`: a photo that is mostly noise as large as its light (misplaced data);
 * :func:`check_crop`: a crop that is perfectly uniform while the photo is not (what a decoder's fill
   of missing data looks like; a real photo's noise never is);
 * :func:`check_maps`: maps constant over the whole set, or a black diffuse map, from a photo that is
   neither constant nor black; a fitted value (the physical estimate's ``found``) that is not finite
-  or out of its range.
+  out of its range (the gain checked on photos that are not uniform).
 """
 
 from __future__ import annotations
@@ -26,9 +25,13 @@ from svbrdf_cli.errors import SvbrdfError
 EXPOSURE_LIMIT = 12.0
 #: Standard deviation under which an image (0-1 units) counts as constant: under a 16-bit step.
 CONSTANT = 1.0 / 65535.0
-#: The physical estimate's fit gain (fraction of the flat profile's residual explained) lies in
-#: [0, 1]; this much either side is rounding.
-FIT_GAIN_SLACK = 1e-3
+#: The physical estimate's fit gain (1 - the fit's residual / the flat profile's) is at most 1 (this
+#: much over is rounding). It is negative where the flash's falloff explains a photo worse than no
+#: falloff (a synthetic marker sheet lit evenly: -100); under FIT_GAIN_LOWEST the fit is no answer.
+FIT_GAIN_SLACK, FIT_GAIN_LOWEST = 1e-3, -1e3
+#: A photo whose brightness varies by less than this fraction of its mean is uniform (its fit's gain
+#: is undefined: the flat profile's residual is ~0).
+UNIFORM = 0.01
 
 
 class ImplausibleError(SvbrdfError):
@@ -57,41 +60,6 @@ def check_crop(path, photo, crop):
                                "Copy or export it again.")
 
 
-#: Noise test (:func:`check_noise`): blocks per side, the neighbour correlation under which a block
-#: is noise, and the spread (standard deviation over mean) over which that noise is no sensor's.
-NOISE_BLOCKS, NOISE_CORRELATION, NOISE_SPREAD = 8, 0.2, 0.25
-
-
-def check_noise(path, linear, side=1024):
-    """Refuse a photo that is mostly noise of the photo's own amplitude: in more than half of an
-    8 x 8 grid of blocks (of its central ``side`` x ``side`` pixels at most), neighbouring pixels are
-    unrelated (correlation under :data:`NOISE_CORRELATION`) while varying by more than
-    :data:`NOISE_SPREAD` of the block's mean. What a damaged file's misplaced data decodes to; a
-    real photo's sensor noise is far smaller than its light."""
-    h, w = linear.shape[:2]
-    y0, x0 = max(0, (h - side) // 2), max(0, (w - side) // 2)
-    lum = np.asarray(linear[y0:y0 + side, x0:x0 + side], np.float32).mean(-1)
-    bh, bw = lum.shape[0] // NOISE_BLOCKS, lum.shape[1] // NOISE_BLOCKS
-    if bh < 4 or bw < 4:
-        return
-    noisy = 0
-    for by in range(NOISE_BLOCKS):
-        for bx in range(NOISE_BLOCKS):
-            b = lum[by * bh:(by + 1) * bh, bx * bw:(bx + 1) * bw].astype(np.float64)
-            mean, std = float(b.mean()), float(b.std())
-            if std <= NOISE_SPREAD * max(mean, 1e-6):
-                continue
-            a, c = b[:, :-1].ravel() - b.mean(), b[:, 1:].ravel() - b.mean()
-            d, e = b[:-1].ravel() - b.mean(), b[1:].ravel() - b.mean()
-            corr = max(float(a @ c) / max(float(np.sqrt((a @ a) * (c @ c))), 1e-20),
-                       float(d @ e) / max(float(np.sqrt((d @ d) * (e @ e))), 1e-20))
-            noisy += corr < NOISE_CORRELATION
-    if noisy > NOISE_BLOCKS ** 2 // 2:
-        raise ImplausibleError(f"Could not use '{path}': {noisy} of its {NOISE_BLOCKS ** 2} regions are noise, not "
-                               "a picture (neighbouring pixels are unrelated); the file is damaged. Copy or export "
-                               "it again.")
-
-
 def check_maps(path, photo, stored, found=None):
     """``photo``: the encoded network input; ``stored``: the maps as written; ``found``: the physical
     estimate's fitted values, if it ran."""
@@ -100,12 +68,13 @@ def check_maps(path, photo, stored, found=None):
         if isinstance(v, (int, float)) and not math.isfinite(v):
             raise ImplausibleError(f"Could not fit '{path}': the fitted {key.replace('_', ' ')} is {v}; the "
                                    "photo cannot be right. Take or copy it again.")
+    mean = float(np.mean(photo))
+    if _std(photo) <= max(CONSTANT, UNIFORM * mean) or mean <= 0:
+        return  # a uniform photo may give constant maps, and its flat profile leaves the fit's gain undefined
     g = (found or {}).get("fit_gain")
-    if isinstance(g, (int, float)) and not -FIT_GAIN_SLACK <= g <= 1 + FIT_GAIN_SLACK:
-        raise ImplausibleError(f"Could not fit '{path}': the fit's gain is {g:g}, outside [0, 1]; the photo cannot "
-                               "be right. Take or copy it again.")
-    if _std(photo) <= CONSTANT or float(np.max(photo)) <= 0:
-        return  # a constant photo may give constant maps
+    if isinstance(g, (int, float)) and not FIT_GAIN_LOWEST <= g <= 1 + FIT_GAIN_SLACK:
+        raise ImplausibleError(f"Could not fit '{path}': the fit's gain is {g:g}, outside [{FIT_GAIN_LOWEST:g}, 1]; "
+                               "the photo cannot be right. Take or copy it again.")
     if all(_std(v) <= CONSTANT for v in stored.values()):
         raise ImplausibleError(f"Could not use '{path}': every map came out constant from a photo that is not; "
                                "the file may be damaged. Take or copy it again.")

@@ -241,12 +241,14 @@ def test_constant_or_black_maps_from_a_real_photo_are_refused():
     plausible.check_maps("flat.jpg", np.full((64, 64, 3), 0.4, np.float32), _maps(0.5))  # a flat photo may
 
 
-@pytest.mark.parametrize("gain", [-0.5, 1e30, float("nan"), float("inf")])
+@pytest.mark.parametrize("gain", [-1e21, 1e30, 1.5, float("nan"), float("inf")])
 def test_an_impossible_fit_is_refused(gain):
     photo = np.random.default_rng(1).uniform(0.1, 0.9, (64, 64, 3)).astype(np.float32)
     with pytest.raises(SvbrdfError, match="'p.jpg'"):
         plausible.check_maps("p.jpg", photo, _maps(), {"fit_gain": gain})
     plausible.check_maps("p.jpg", photo, _maps(), {"fit_gain": 0.93})
+    plausible.check_maps("p.jpg", photo, _maps(), {"fit_gain": -99.5})  # an evenly lit sheet's
+    plausible.check_maps("flat.png", np.full((64, 64, 3), 0.4, np.float32), _maps(), {"fit_gain": -1e21})
 
 
 def test_exposure_at_its_limit_and_a_uniform_crop_are_refused():
@@ -258,14 +260,6 @@ def test_exposure_at_its_limit_and_a_uniform_crop_are_refused():
     with pytest.raises(SvbrdfError, match="'g.jpg'.*perfectly uniform"):
         plausible.check_crop("g.jpg", photo, photo[120:280, 100:260])
     plausible.check_crop("g.jpg", photo, photo[0:100, 0:100])
-
-
-def test_a_photo_of_noise_is_refused_and_a_noisy_flat_one_is_not():
-    rng = np.random.default_rng(0)
-    with pytest.raises(SvbrdfError, match="'n.tif'.*noise"):
-        plausible.check_noise("n.tif", rng.uniform(0, 1, (256, 256, 3)).astype(np.float32))
-    wall = 0.4 + rng.normal(0, 0.02, (256, 256, 3)).astype(np.float32)  # sensor noise on a plain wall
-    plausible.check_noise("wall.tif", wall)
 
 
 # --------------------------------------------------------------------------
