@@ -168,3 +168,24 @@ def curve(folder, out):
         raise click.ClickException(f"{path}: no evaluations yet")
     curve_mod.plot(curve_mod.read(path), out)
     click.echo(out)
+
+
+@main.command()
+@click.option("--run", "folder", default="runs/swift", show_default=True)
+@click.option("--out", default="weights/swift", show_default=True, help="Folder for chain.onnx.")
+def onnx(folder, out):
+    """Export the run's chain (its last saved state) as OUT/chain.onnx with its provenance."""
+    import json
+    import os
+
+    from export.engine import onnx as engine_onnx
+    from export.engine.run import Run
+
+    run = Run(folder, log=lambda m: None, checkpoint=CHECKPOINT)
+    curve = os.path.join(folder, "curve.jsonl")
+    last = json.loads(open(curve).read().splitlines()[-1]) if os.path.isfile(curve) else {}
+    provenance = {"run": folder, "step": run.step, "samples": run.samples, "cpu_hours": round(run.cpu / 3600, 3),
+                  "stage": run.stage, "schedule": run.config.schedule, "bank": "export.engine.bank (procedural, CC0, mixes)",
+                  "des19": last.get("des19")}
+    path = engine_onnx.export(run.net, os.path.join(out, "chain.onnx"), provenance)
+    click.echo(f"{path}: {os.path.getsize(path) / 1e6:.1f} MB, {run.samples} samples")

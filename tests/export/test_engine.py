@@ -191,3 +191,25 @@ def test_a_compact_checkpoint_resumes_the_run_exactly(tmp_path, small_bank):
     resumed.train(steps=2, evaluate=False)
     a, b = full.net.state_dict(), resumed.net.state_dict()
     assert all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_the_exported_chain_matches_torch(tmp_path):
+    ort = pytest.importorskip("onnxruntime")
+    from export.engine import onnx as engine_onnx
+
+    torch.manual_seed(0)
+    net = nets.build().eval()
+    for m in (net.aux, net.maps):  # give the zero heads something to say
+        torch.nn.init.normal_(m.head.weight, std=0.01)
+    path = engine_onnx.export(net, str(tmp_path / "chain.onnx"), provenance={"test": True})
+    photo = torch.rand(1, 3, 96, 64)
+    light = torch.tensor([[0.1, 0.2, 2.4]])
+    feeds = {"photo": photo, "context": flash.context(light, light, 96)[..., :64], "base": flash.base(photo, light, light)}
+    with torch.no_grad():
+        masks, aux, maps = net(**feeds)
+    sess = ort.InferenceSession(path, providers=["CPUExecutionProvider"])
+    got = sess.run(None, {k: v.numpy() for k, v in feeds.items()})
+    want = [masks, aux.clamp(0, 1), torch.cat([maps[k] for k in cv.MAP_NAMES], 1)]
+    for g, w in zip(got, want):
+        assert g.shape == tuple(w.shape)
+        assert np.abs(g - w.numpy()).max() < 1e-4
