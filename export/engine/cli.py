@@ -4,6 +4,10 @@
     python -m export.engine train --run runs/swift     # train, or resume the run in that folder
     python -m export.engine background --run runs/swift  # the same, detached, on one core
     python -m export.engine stop --run runs/swift      # SIGTERM: save and exit 0
+    python -m export.engine compact --run runs/swift   # the run's state as files to commit
+
+A run folder without a state resumes from the committed checkpoint (``--checkpoint``, default
+:data:`CHECKPOINT`), so on a fresh machine ``background`` picks up where the last session stopped.
 """
 
 from __future__ import annotations
@@ -11,6 +15,9 @@ from __future__ import annotations
 import click
 
 from export.engine import bank as bank_mod
+
+#: The committed compact checkpoint of the current run (export.engine.run.write_compact).
+CHECKPOINT = "weights/checkpoints/swift-run"
 
 
 @click.group()
@@ -45,14 +52,16 @@ def _setup(threads):
 @click.option("--minutes", type=float, default=None, help="Stop after this many minutes.")
 @click.option("--checkpoint-minutes", type=float, default=None, help="Save every this many minutes (default 10).")
 @click.option("--eval-minutes", type=float, default=None, help="Evaluate every this many minutes (default 30).")
-def train(folder, threads, steps, minutes, checkpoint_minutes, eval_minutes):
+@click.option("--checkpoint", default=CHECKPOINT, show_default=True,
+              help="Committed compact checkpoint to resume from when FOLDER holds no state.")
+def train(folder, threads, steps, minutes, checkpoint_minutes, eval_minutes, checkpoint):
     """Train the swift chain in FOLDER, or resume it; SIGTERM/SIGINT save and exit 0."""
     import dataclasses
 
     from export.engine.run import Run
 
     _setup(threads)
-    run = Run(folder, log=lambda m: click.echo(m, err=True))
+    run = Run(folder, log=lambda m: click.echo(m, err=True), checkpoint=checkpoint)
     changes = {k: v for k, v in (("checkpoint_minutes", checkpoint_minutes), ("eval_minutes", eval_minutes))
                if v is not None}
     if changes:
@@ -87,6 +96,23 @@ def background(folder):
     with open(pid_file, "w") as f:
         f.write(str(p.pid))
     click.echo(f"training {folder} in the background as pid {p.pid}; log: {folder}/log.txt")
+
+
+@main.command()
+@click.option("--run", "folder", default="runs/swift", show_default=True)
+@click.option("--out", default=CHECKPOINT, show_default=True)
+def compact(folder, out):
+    """Write FOLDER's last saved state to OUT as files under 25 MB (commit them)."""
+    import os
+
+    from export.engine.run import Run
+
+    if not os.path.isfile(os.path.join(folder, "state.pt")):
+        raise click.ClickException(f"{folder}: no saved state")
+    run = Run(folder, log=lambda m: None)
+    run.save_compact(out)
+    size = sum(os.path.getsize(os.path.join(out, f)) for f in os.listdir(out))
+    click.echo(f"{out}: step {run.step}, stage {run.stage}, {run.samples} samples, {size / 1e6:.1f} MB")
 
 
 @main.command()
@@ -142,3 +168,24 @@ def curve(folder, out):
         raise click.ClickException(f"{path}: no evaluations yet")
     curve_mod.plot(curve_mod.read(path), out)
     click.echo(out)
+
+
+@main.command()
+@click.option("--run", "folder", default="runs/swift", show_default=True)
+@click.option("--out", default="weights/swift", show_default=True, help="Folder for chain.onnx.")
+def onnx(folder, out):
+    """Export the run's chain (its last saved state) as OUT/chain.onnx with its provenance."""
+    import json
+    import os
+
+    from export.engine import onnx as engine_onnx
+    from export.engine.run import Run
+
+    run = Run(folder, log=lambda m: None, checkpoint=CHECKPOINT)
+    curve = os.path.join(folder, "curve.jsonl")
+    last = json.loads(open(curve).read().splitlines()[-1]) if os.path.isfile(curve) else {}
+    provenance = {"run": folder, "step": run.step, "samples": run.samples, "cpu_hours": round(run.cpu / 3600, 3),
+                  "stage": run.stage, "schedule": run.config.schedule, "bank": "export.engine.bank (procedural, CC0, mixes)",
+                  "des19": last.get("des19")}
+    path = engine_onnx.export(run.net, os.path.join(out, "chain.onnx"), provenance)
+    click.echo(f"{path}: {os.path.getsize(path) / 1e6:.1f} MB, {run.samples} samples")

@@ -111,18 +111,23 @@ def maps_loss(pred, target, weights):
 class Run:
     """One run folder: load or start, train, save, evaluate."""
 
-    def __init__(self, folder, config=None, log=print, des19=None):
+    def __init__(self, folder, config=None, log=print, des19=None, checkpoint=None):
         self.folder = folder
         self.log = log
         os.makedirs(folder, exist_ok=True)
         path = os.path.join(folder, "state.pt")
+        state = None
         if os.path.isfile(path):
             state = torch.load(path, map_location="cpu", weights_only=False)
+        elif checkpoint and os.path.isfile(os.path.join(checkpoint, "manifest.json")):
+            state = read_compact(checkpoint)
+            self._restore_curve(checkpoint)
+            log(f"{folder}: resumed from the committed checkpoint {checkpoint}")
+        if state is not None:
             self.config = _config_from(state["config"])
             if config is not None and dataclasses.asdict(config)["schedule"] != dataclasses.asdict(self.config)["schedule"]:
                 self.config = dataclasses.replace(self.config, schedule=config.schedule)
         else:
-            state = None
             self.config = config or RunConfig()
         c = self.config
         with torch.random.fork_rng():
@@ -133,7 +138,9 @@ class Run:
         self.step, self.stage_index, self.stage_samples, self.samples, self.cpu = 0, 0, 0, 0, 0.0
         self.started = None
         if state is not None:
-            self.net.load_state_dict(state["model"])
+            own = self.net.state_dict()
+            own.update(state["model"])  # a compact checkpoint leaves out the stages not trained yet
+            self.net.load_state_dict(own)
             self.g.set_state(state["generator"])
             self.step, self.stage_index = state["step"], state["stage_index"]
             self.stage_samples, self.samples, self.cpu = state["stage_samples"], state["samples"], state["cpu"]
@@ -165,6 +172,26 @@ class Run:
 
     def save(self):
         atomic_torch_save(self.state(), os.path.join(self.folder, "state.pt"))
+
+    def _restore_curve(self, checkpoint):
+        src = os.path.join(checkpoint, "curve.jsonl")
+        dst = os.path.join(self.folder, "curve.jsonl")
+        if os.path.isfile(src) and not os.path.isfile(dst):
+            with open(src) as f, open(dst, "w") as g:
+                g.write(f.read())
+
+    def save_compact(self, out):
+        """The run's state as files under 25 MB in ``out`` (weights of the stages trained so far, the
+        optimiser, the generator and counters; the later stages' weights are their seeded start),
+        with its curve: what a session commits so the next one resumes exactly."""
+        state = self.state()
+        done = {s for s, _ in self.config.schedule[:self.stage_index + 1]}
+        state["model"] = {k: v for k, v in state["model"].items() if k.split(".")[0] in done}
+        write_compact(state, out)
+        src = os.path.join(self.folder, "curve.jsonl")
+        if os.path.isfile(src):
+            with open(src) as f, open(os.path.join(out, "curve.jsonl"), "w") as g:
+                g.write(f.read())
 
     # -- training -----------------------------------------------------------------------------
     def _lr(self):
@@ -284,6 +311,83 @@ class Run:
             f.write(json.dumps(entry) + "\n")
         self.log(f"eval: {json.dumps(entry)}")
         return entry
+
+
+# -- compact checkpoints -----------------------------------------------------------------------
+PART_BYTES = 20_000_000
+
+
+def write_compact(state, out):
+    """``state`` as ``part_NN.pt`` files of at most about :data:`PART_BYTES` each (tensors grouped in
+    order) and ``manifest.json``; old parts are replaced, never left mixed with new ones."""
+    import shutil
+    import tempfile
+
+    flat, rest = {}, {}
+
+    def walk(prefix, x):
+        if torch.is_tensor(x):
+            flat[prefix] = x
+        elif isinstance(x, dict):
+            rest_keys = {}
+            for k, v in x.items():
+                sub = walk(f"{prefix}/{k}", v)
+                if sub is not None:
+                    rest_keys[k] = sub
+            return rest_keys
+        else:
+            return x
+        return None
+
+    rest = walk("", state)
+    parts, current, size = [], {}, 0
+    for k, v in flat.items():
+        n = v.numel() * v.element_size()
+        if current and size + n > PART_BYTES:
+            parts.append(current)
+            current, size = {}, 0
+        current[k] = v
+        size += n
+    parts.append(current)
+    parent = os.path.dirname(os.path.abspath(out))
+    os.makedirs(parent, exist_ok=True)
+    tmp = tempfile.mkdtemp(dir=parent, prefix=".compact-")
+    for i, p in enumerate(parts):
+        torch.save(p, os.path.join(tmp, f"part_{i:02d}.pt"))
+    with open(os.path.join(tmp, "manifest.json"), "w") as f:
+        json.dump({"parts": len(parts), "rest": rest}, f, indent=1, default=str)
+    if os.path.isdir(out):
+        for name in os.listdir(out):
+            if name.startswith("part_") or name in ("manifest.json", "curve.jsonl"):
+                os.remove(os.path.join(out, name))
+    os.makedirs(out, exist_ok=True)
+    for name in os.listdir(tmp):
+        os.replace(os.path.join(tmp, name), os.path.join(out, name))
+    shutil.rmtree(tmp)
+
+
+def read_compact(folder):
+    """The state :func:`write_compact` wrote."""
+    with open(os.path.join(folder, "manifest.json")) as f:
+        m = json.load(f)
+    flat = {}
+    for i in range(m["parts"]):
+        flat.update(torch.load(os.path.join(folder, f"part_{i:02d}.pt"), map_location="cpu", weights_only=True))
+    state = m["rest"]
+    for key, v in flat.items():
+        node = state
+        names = key.strip("/").split("/")
+        for n in names[:-1]:
+            node = node.setdefault(n, {})
+        node[names[-1]] = v
+    return _fix_int_keys(state)
+
+
+def _fix_int_keys(x):
+    """JSON turned the optimiser's integer keys into strings: turn them back."""
+    if isinstance(x, dict):
+        return {(int(k) if isinstance(k, str) and k.isdigit() else k): _fix_int_keys(v) for k, v in x.items()}
+    return x
 
 
 # -- Des19 ------------------------------------------------------------------------------------

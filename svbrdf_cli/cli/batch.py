@@ -6,7 +6,7 @@ import click
 from svbrdf_cli.run.batch import PHOTO_EXTENSIONS, collect_inputs, run_local
 from svbrdf_cli.cli.options import capture_options, finish
 from svbrdf_cli.cli.progress import TerminalReport
-from svbrdf_cli.write.gallery import write_gallery
+from svbrdf_cli.write.gallery import GALLERY, write_gallery
 from svbrdf_cli.run.ray_engine import is_uri
 
 ENGINES = ("local", "ray")
@@ -38,6 +38,7 @@ def batch_cmd(folder, job, engine, address, workers):
     if job.opts.name:
         raise click.UsageError("--name names one material; a batch names each set after its photo.")
     job.skip_done = True
+    job.reserved = (GALLERY,)
     files, ignored = collect_inputs([folder])
     if not files:
         raise click.UsageError(f"no photos in '{folder}' (looked for {', '.join(sorted(PHOTO_EXTENSIONS))} and RAW files).")

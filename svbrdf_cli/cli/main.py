@@ -1,16 +1,44 @@
 """The ``svbrdf`` command group: verbosity, version, error reporting, sub-commands."""
 
+import contextlib
 import logging
+import signal
+import threading
 
 import click
 
 from svbrdf_cli.version import __version__
 from svbrdf_cli.cli.options import quiet_opt, set_verbosity, verbose_opt
+from svbrdf_cli.ingest.decoder_output import guard_python_stderr
 from svbrdf_cli.errors import SvbrdfError
+
+
+@contextlib.contextmanager
+def _signals_end_the_run():
+    """SIGTERM and SIGHUP end the run as Ctrl-C does, through every clean-up on the way out (a set
+    being written is finished or its temporary folder removed): exit 128 + the signal's number."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def stop(signum, frame):
+        raise SystemExit(128 + signum)
+
+    previous = {s: signal.signal(s, stop) for s in (signal.SIGTERM, getattr(signal, "SIGHUP", None)) if s}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
 
 
 class SvbrdfGroup(click.Group):
     """Turns library errors into one-line messages and exit code 1."""
+
+    def main(self, *args, **kwargs):
+        """Run the group with SIGTERM and SIGHUP ending the run cleanly and the decoders' stderr caught."""
+        with _signals_end_the_run(), guard_python_stderr():  # (the decoders' fd 2 is caught: decoder_output)
+            return super().main(*args, **kwargs)
 
     def invoke(self, ctx):
         """Run the command; a library error becomes one line and exit code 1."""

@@ -30,6 +30,7 @@ def set_verbosity(quiet=False, verbose=0):
     level = logging.ERROR if quiet else (logging.WARNING, logging.INFO, logging.DEBUG)[min(verbose, 2)]
     logging.basicConfig(format="%(levelname)s: %(message)s", stream=sys.stderr)
     logging.getLogger().setLevel(level)
+    logging.captureWarnings(True)  # Python's warnings as WARNING lines: none under -q
     return quiet
 
 

@@ -7,6 +7,7 @@ import numpy as np
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.errors import SvbrdfError
 from svbrdf_cli.imageops import resize
+from svbrdf_cli.ingest import plausible
 from svbrdf_cli.ingest import photo as ingest
 
 #: The networks' working resolution (exported and validated at it; trained on 128 px crops).
@@ -17,7 +18,7 @@ MAX_EXPOSURE_STOPS = 20.0
 
 def auto_exposure_gain(linear, target=cv.AUTO_EXPOSURE_MEAN):
     """Gain making the encoded image's mean ``target`` (what the networks were trained on)."""
-    lo, hi = -12.0, 12.0
+    lo, hi = -plausible.EXPOSURE_LIMIT, plausible.EXPOSURE_LIMIT
     flat = linear.reshape(-1, 3)[:: max(1, linear.size // 3 // 65536)]
     if float(flat.max()) <= 0:
         raise SvbrdfError("the crop is black")

@@ -25,6 +25,8 @@ import tempfile
 import numpy as np
 
 from svbrdf_cli import conventions as cv
+from svbrdf_cli.ingest import decoder_output
+from svbrdf_cli.ingest import filecheck
 from svbrdf_cli.errors import ImageReadError
 
 log = logging.getLogger("svbrdf")
@@ -49,6 +51,7 @@ class Photo:
     scale: float = 1.0          # decoded at this fraction of the file's size (1/2, 1/4 ...)
     sha256: str | None = None   # of the file's bytes (read once, with the checks of its format)
     focal_35mm: float | None = None  # 35 mm-equivalent focal length from the EXIF, when it has one
+    opaque: tuple | None = None  # (x0, y0, x1, y1): the opaque region kept of a file with transparent borders
 
 
 def load_photo(path, white_balance=None, min_side=None):
@@ -112,10 +115,20 @@ def encode_for_network(linear, gain=None, fast=False):
 
 
 def _load_raw(path, name, min_side=None):
+    """A camera RAW through LibRaw, each in a fresh decoder state: its image data checked to exist first
+    (:func:`svbrdf_cli.ingest.filecheck.raw_data_problem`), its large buffers fresh from the system
+    (:func:`_fresh_large_buffers`: what LibRaw leaves unfilled is zero, never an earlier photo's pixels),
+    and what it prints caught (a "data corrupted" refuses the file)."""
     import rawpy
 
+    problem = filecheck.tiff_problem(name)
+    if problem:
+        raise ImageReadError(f"Could not decode RAW '{path}': {problem}; the file is damaged or cut short. "
+                             "Copy it from the camera again.")
+    _fresh_large_buffers()
+    said = []
     try:
-        with rawpy.imread(name) as raw:
+        with decoder_output.captured() as said, rawpy.imread(name) as raw:
             factor = _reduction(raw.sizes.width, raw.sizes.height, min_side)
             # half-size demosaicing (each 2x2 Bayer block one pixel) when half the size is enough
             rgb = raw.postprocess(use_camera_wb=True, no_auto_bright=True, output_bps=16, gamma=(1, 1),
@@ -125,6 +138,7 @@ def _load_raw(path, name, min_side=None):
         why = (why.decode(errors="replace") if isinstance(why, bytes) else str(why)).strip() or type(e).__name__
         raise ImageReadError(f"Could not decode RAW '{path}': {why}. "
                              "Convert it to DNG or 16-bit TIFF with the camera's software.") from None
+    _judge_decoder_output(path, said, "LibRaw")
     if rgb.ndim != 3 or rgb.shape[-1] != 3:
         raise ImageReadError(f"Could not decode RAW '{path}': got {rgb.shape} instead of RGB. Convert it to TIFF.")
     if factor > 2:
@@ -280,20 +294,48 @@ def _decode_strips(inp, spec, factor):
 
 
 def _load_image(path, name, min_side=None, data=b""):
-    import OpenImageIO as oiio
-
     kind = _sniff(data)
     if kind == "heif":
         raise ImageReadError(f"Could not read '{path}': HEIC/HEIF photos are not supported. Export it as JPEG "
                              "(iPhone: Settings > Camera > Formats > Most Compatible).")
-    if kind in ("jpeg", "png") and _truncated(data, kind):
+    if kind == "png":
+        _check_png(path, data)
+    problem = filecheck.tiff_problem(data)  # (None unless the file is TIFF-structured)
+    if problem:
+        raise ImageReadError(f"Could not read '{path}': {problem}; the file is damaged. Export it again.")
+    if kind == "jpeg" and _truncated(data, kind):
         raise ImageReadError(f"Could not read '{path}': the file is truncated (its end is missing). "
                              "Copy it from the camera again.")
+    with decoder_output.captured() as said:
+        decoded = _decode_image(path, name, kind, min_side)
+    _judge_decoder_output(path, said, "the JPEG decoder" if kind == "jpeg" else "the decoder")
+    rgb, alpha, orientation, bits, floating, factor, (w, h), focal = decoded
+    if factor > 1:
+        log.info("'%s' is %dx%d: decoded at 1/%d (%dx%d), all the output needs", path, w, h, factor,
+                 w // factor, h // factor)
+    opaque = None
+    if alpha is not None:
+        rgb, opaque = _opaque_region(path, rgb, alpha)
+    rgb = np.ascontiguousarray(_orient(rgb, orientation))
+    if floating:
+        _check_light_values(path, rgb)
+        _repair_non_finite(path, rgb)
+        np.maximum(rgb, 0.0, out=rgb)
+    elif floating is not None:  # (None: decoded to linear already)
+        _srgb_to_linear_inplace(rgb)
+    return Photo(rgb, path, "linear" if floating else "encoded", bits, 1.0 / factor, opaque=opaque, focal_35mm=focal)
+
+
+def _decode_image(path, name, kind, min_side):
+    """The decoding part of :func:`_load_image` (fd 2 is caught meanwhile: nothing here may log):
+    (rgb, alpha or None, orientation, bits, floating, factor, (width, height))."""
+    import OpenImageIO as oiio
+
     config = oiio.ImageSpec()
     config.attribute("oiio:UnassociatedAlpha", 1)  # colour as stored, alpha apart (never premultiplied)
     inp = oiio.ImageInput.open(name, config)
     if inp is None:
-        why = (oiio.geterror().strip().splitlines() or ["unknown format"])[0]
+        why = oiio_message(None, "unknown format")
         raise ImageReadError(f"Could not read '{path}': {why}. Use a JPEG, PNG, TIFF, EXR or camera RAW file.")
     try:
         spec = inp.spec()
@@ -318,25 +360,74 @@ def _load_image(path, name, min_side=None, data=b""):
         else:
             px = _decode_strips(inp, spec, factor)
             if px is None:
-                why = (oiio.geterror().strip().splitlines() or ["truncated data"])[0]
+                why = oiio_message(inp, "the decoder gave no pixels")
                 raise ImageReadError(f"Could not decode '{path}': {why}. The file may be damaged; export it again.")
+            if inp.has_error:  # the pixels came with a complaint (libjpeg's "Corrupt JPEG data" ...)
+                why = oiio_message(inp, "the decoder reported an error")
+                raise ImageReadError(f"Could not decode '{path}': {why}. The file is damaged; export it again.")
             rgb, alpha = _channels(px, spec)
             del px
     finally:
         if inp is not None:
             inp.close()
-    if factor > 1:
-        log.info("'%s' is %dx%d: decoded at 1/%d (%dx%d), all the output needs", path, w, h, factor,
-                 w // factor, h // factor)
-    if alpha is not None:
-        rgb = _opaque_region(path, rgb, alpha)
-    rgb = np.ascontiguousarray(_orient(rgb, orientation))
-    if floating:
-        _repair_non_finite(path, rgb)
-        np.maximum(rgb, 0.0, out=rgb)
-    elif floating is not None:  # (None: decoded to linear already)
-        _srgb_to_linear_inplace(rgb)
-    return Photo(rgb, path, "linear" if floating else "encoded", bits, 1.0 / factor, focal_35mm=focal)
+    return rgb, alpha, orientation, bits, floating, factor, (w, h), focal
+
+
+def oiio_message(source=None, default="unknown error"):
+    """The first line of OpenImageIO's error (``source``'s, else the global one), whatever bytes it
+    holds (a damaged file's message may not be UTF-8)."""
+    import OpenImageIO as oiio
+
+    try:
+        text = source.geterror() if source is not None else oiio.geterror()
+    except UnicodeDecodeError:
+        return "the decoder's message is not readable text (the file is damaged)"
+    return (str(text).strip().splitlines() or [default])[0]
+
+
+def _judge_decoder_output(path, said, who):
+    """What a decoder printed while decoding ``path``: a line saying pixels were made up refuses the
+    file; anything else is logged (at info level: never under -q)."""
+    text = said[0] if said else ""
+    bad = decoder_output.corruption(text)
+    if bad:
+        raise ImageReadError(f"Could not decode '{path}': {who} says \"{bad}\"; the file is damaged. "
+                             "Copy or export it again.")
+    for line in decoder_output.lines(text)[:5]:
+        log.info("'%s': %s says: %s", path, who, line)
+
+
+def _check_png(path, data):
+    problem, trailing = filecheck.png_problem(data)
+    if problem:
+        raise ImageReadError(f"Could not read '{path}': {problem}. Copy or export it again.")
+    if trailing:
+        log.warning("'%s': %d bytes after the end of the PNG image were ignored", path, trailing)
+
+
+#: glibc's threshold above which every allocation gets fresh (zeroed) pages from the system, set
+#: before the first RAW decode (glibc's own threshold moves up to 32 MB as large buffers are freed,
+#: after which a new raw buffer may reuse the memory of the last photo).
+FRESH_BUFFER_BYTES = 1 << 20
+
+
+def _fresh_large_buffers():
+    """Fix glibc's mmap threshold at :data:`FRESH_BUFFER_BYTES` (once; elsewhere nothing to do)."""
+    global _FRESH_SET
+    if _FRESH_SET:
+        return
+    _FRESH_SET = True
+    try:
+        import ctypes
+        import ctypes.util
+
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        libc.mallopt(-3, FRESH_BUFFER_BYTES)  # M_MMAP_THRESHOLD
+    except (OSError, AttributeError):  # not glibc: the data check above still runs
+        pass
+
+
+_FRESH_SET = False
 
 
 def _channels(px, spec):
@@ -363,22 +454,54 @@ def _check_size(path, kind, w, h):
                              "the file is damaged. Export it again.")
 
 
+#: The most of each side a transparent border may take for the photo to be used (cropped to its
+#: opaque part): more, and the flash's centre may be in what is cut away.
+MAX_TRANSPARENT_BORDER = 0.15
+
+
 def _opaque_region(path, rgb, alpha):
-    """The photo cropped to its opaque part when transparency only surrounds it; refused when the
-    picture itself has transparent holes (they hold no colour: they would be baked into every map)."""
+    """(the photo cropped to its opaque part, (x0, y0, x1, y1) or None) when transparency only
+    surrounds it in a border of at most :data:`MAX_TRANSPARENT_BORDER` of each side; refused when the
+    border is wider or the picture itself has transparent holes (they hold no colour: they would be
+    baked into every map)."""
     clear = alpha < TRANSPARENT
     if not clear.any():
-        return rgb
+        return rgb, None
     if clear.all():
         raise ImageReadError(f"Could not use '{path}': it is fully transparent.")
+    h, w = clear.shape
     ys, xs = np.flatnonzero(~clear.all(1)), np.flatnonzero(~clear.all(0))
     y0, y1, x0, x1 = int(ys[0]), int(ys[-1]) + 1, int(xs[0]), int(xs[-1]) + 1
     holes = float(clear[y0:y1, x0:x1].mean())
     if holes > 0.001:
         raise ImageReadError(f"Could not use '{path}': {holes:.1%} of the picture is transparent, and transparent "
                              "pixels hold no colour. Flatten it onto its background or crop the transparent part out.")
-    log.warning("'%s': using its opaque %dx%d region (the rest is transparent)", path, x1 - x0, y1 - y0)
-    return rgb[y0:y1, x0:x1]
+    cut = max(y0 / h, (h - y1) / h, x0 / w, (w - x1) / w)
+    if cut > MAX_TRANSPARENT_BORDER:
+        raise ImageReadError(f"Could not use '{path}': only its {x1 - x0}x{y1 - y0} region of {w}x{h} is opaque "
+                             f"(a transparent border takes {cut:.0%} of a side; the flash's centre may be in it). "
+                             "Crop the file to the photographed surface or flatten it onto its background.")
+    log.warning("'%s': using its opaque %dx%d region of %dx%d (the rest is transparent)", path, x1 - x0, y1 - y0,
+                w, h)
+    return rgb[y0:y1, x0:x1], (x0, y0, x1, y1)
+
+
+#: Linear samples beyond this are no light a photo records (a float file's damaged data is mostly
+#: such numbers: random bits make exponents of every size).
+MAX_LIGHT = 1e6
+#: The most of a float photo's pixels that may hold samples that are not light values (NaN, infinite,
+#: under -1e-3 or over :data:`MAX_LIGHT`) for the rest to be used (they are set to black).
+MAX_BROKEN_PIXELS = 0.005
+
+
+def _check_light_values(path, rgb):
+    """Refuse a float photo whose samples are too often not light values (the file is damaged)."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        bad = (~np.isfinite(rgb) | (rgb < -1e-3) | (rgb > MAX_LIGHT)).any(-1)
+    share = float(bad.mean())
+    if share > MAX_BROKEN_PIXELS:
+        raise ImageReadError(f"Could not use '{path}': {share:.1%} of its pixels hold numbers that are no light values "
+                             "(NaN, infinite, negative or huge); the file is damaged. Export it again.")
 
 
 def _repair_non_finite(path, rgb):

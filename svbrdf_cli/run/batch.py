@@ -39,6 +39,7 @@ class Job:
     threads: int = 0        # onnxruntime threads (0: one per core)
     skip_done: bool = False  # skip photos whose set is complete (batch: resume); else they fail without --force
     quiet: bool = False
+    reserved: tuple = ()     # names in ``output`` the run writes itself (batch: the gallery): no set takes one
 
 
 class Report:
@@ -114,6 +115,11 @@ def plan_inputs(files, job, err, store=None):
             failed += 1
             continue
         seen[folder] = f
+        if stem in job.reserved:
+            err(f"'{f}' would write its set to '{folder}', a name the run keeps for its own file; "
+                "rename the photo.")
+            failed += 1
+            continue
         exists = store.exists(stem) if store else os.path.exists(folder)
         if exists and not job.opts.force:
             if job.skip_done and (store.complete(stem) if store else pipeline.is_complete(folder)):

@@ -37,6 +37,8 @@ from svbrdf_cli.version import __version__
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.ingest import photo as ingest
 from svbrdf_cli.rectify import crops as rectify
+from svbrdf_cli.write import ownership
+from svbrdf_cli.ingest import plausible
 from svbrdf_cli.errors import SvbrdfError
 from svbrdf_cli.imageops import resize
 from svbrdf_cli.infer.exposure import NETWORK_SIZE, auto_exposure_gain, network_input
@@ -130,10 +132,13 @@ def prepare(path, opts):
         raise rectify.CropError(f"Could not crop '{path}': the crop is only {c.image.shape[0]} px wide; "
                                 "use a larger region or a sharper photo.")
     small = resize(c.image, NETWORK_SIZE)
+    plausible.check_crop(path, photo.linear, c.image)
     try:
         gain = opts.exposure if opts.exposure is not None else auto_exposure_gain(small)
     except SvbrdfError as e:
         raise SvbrdfError(f"Could not expose '{path}': {e}; crop a part the flash lights (--corners).") from None
+    if opts.exposure is None:
+        plausible.check_exposure(path, gain)
     t2 = time.perf_counter()
     return Prepared(os.fspath(path), photo, c, small, float(gain), {"read": t1 - t0, "crop": t2 - t1})
 
@@ -202,6 +207,7 @@ def infer_set(prepared, chain, out_root, opts, model_name="fast", progress=None)
     for k, v in stored.items():
         if not np.isfinite(v).all():
             raise SvbrdfError(f"The model produced non-finite values for '{p.path}' ({k}); please report this photo.")
+    plausible.check_maps(p.path, net_in, stored, chain.describe().get("found"))
     maps = None  # linear maps, made only where needed (the native preset writes the stored ones)
     if opts.tileable:
         from svbrdf_cli.write.mapset import linear_to_stored
@@ -223,7 +229,7 @@ def infer_set(prepared, chain, out_root, opts, model_name="fast", progress=None)
         "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         "input": {"file": os.path.abspath(p.path), "sha256": p.photo.sha256, "kind": p.photo.kind,
                   "bits": p.photo.bits, "width": int(p.photo.linear.shape[1]), "height": int(p.photo.linear.shape[0]),
-                  "decoded_at": p.photo.scale},
+                  "decoded_at": p.photo.scale, **({"opaque_region": list(p.photo.opaque)} if p.photo.opaque else {})},
         "model": {"name": model_name, **chain.describe()},
         "crop": _jsonable(p.crop.report),
         "exposure": {"mode": "auto" if opts.exposure is None else "manual", "stops": round(p.gain_ev, 3)},
@@ -268,8 +274,7 @@ def _write_set(path, folder, opts, record, timings, stored, maps, net_in, out, c
                 write_image(os.path.join(tmp, "debug", f"{k}.png"), v)
                 names.append(f"debug/{k}.png")
         timings["write"] = time.perf_counter() - t2
-        files = sorted(os.path.relpath(os.path.join(d, n), tmp).replace(os.sep, "/")
-                       for d, _, ns in os.walk(tmp) for n in ns)
+        files = ownership.files_in(tmp)  # (not the temporary folder's own marker)
         rec = dict(record, files=files + [RECORD],
                    timings_s={k: round(v, 4) for k, v in timings.items()})
         with open(os.path.join(tmp, RECORD), "w") as f:

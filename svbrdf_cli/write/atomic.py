@@ -1,40 +1,42 @@
-"""Texture sets written whole or not at all, and replaced only when they are ours.
+"""Texture sets written whole or not at all, and only ever replacing what svbrdf wrote.
 
 :func:`write_set` writes every file into a hidden temporary folder beside the set
-(``.svbrdf-<pid>-<random>.partial``) and renames it into place once complete. The rename happens
-under a lock on the parent folder, after checking again that nothing appeared there meanwhile, so
-two runs writing the same set never silently replace each other: without ``force`` the second
-fails with "already exists".
+(``.svbrdf-<pid>-<token>.partial``, holding a marker naming the pid, host and token: see
+:mod:`svbrdf_cli.write.ownership`), adds the set's manifest (every file with its SHA-256) and renames the
+folder into place once complete. The rename happens under a lock on the parent folder, after
+checking again that nothing appeared there meanwhile, so two runs writing the same set never
+silently replace each other: without ``force`` the second fails with "already exists".
 
-``force`` replaces only a folder that is a texture set this tool wrote (it holds one of
-:data:`SET_MARKERS`), never a folder holding anything else, and never one that holds a file the
-run reads (``protect``: the photo, the source set). :func:`clean_partials` removes the temporary
-folders of runs that died mid-write, never those of a run still going.
+``force`` updates a folder only when it is a texture set svbrdf wrote (its manifest, or for older
+sets its records, say so; a file name alone never does), and then replaces only the files its
+manifest lists and that are still as svbrdf wrote them: files the user added or changed stay where
+they are, and a new file whose name one of them holds stops the run before anything changes. It never
+touches a folder holding a file the run reads (``protect``: the photo, the source set), nor one
+reached through a symbolic link. :func:`clean_partials` removes the temporary folders of runs that
+died mid-write on this host, never those of a run still going and never a folder that is not
+recognisably ours.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
-import re
 import shutil
 import tempfile
 
+from svbrdf_cli.write import ownership
 from svbrdf_cli.errors import ImageWriteError
 from svbrdf_cli.imageio import umask
 
-#: A folder holding one of these was written by svbrdf: ``texture_set.json`` by every preset,
-#: ``material.json`` by ``svbrdf capture``.
-SET_MARKERS = ("texture_set.json", "material.json")
-#: Temporary folders: ``.svbrdf-<pid>-<random>.partial`` (being written) and ``.old`` (being replaced).
-_TEMPORARY = re.compile(r"^\.svbrdf-(\d+)-[^/]*\.(partial|old)$")
-#: Temporary folders of versions before the pid was in the name, ``.<set>.<8 random>.partial``.
-_LEGACY = re.compile(r"^\..+\.[a-z0-9_]{8}\.(partial|old)$")
+#: The records a set svbrdf wrote holds (their content, not their names, makes it ours:
+#: :func:`svbrdf_cli.write.ownership.read_manifest`).
+SET_MARKERS = (ownership.MANIFEST, ownership.RECORD)
 
 
 def is_our_set(folder):
-    """Whether ``folder`` is a texture set written by svbrdf."""
-    return any(os.path.isfile(os.path.join(folder, m)) for m in SET_MARKERS)
+    """Whether ``folder`` is a texture set written by svbrdf (by what it holds: see
+    :func:`svbrdf_cli.write.ownership.read_manifest`)."""
+    return ownership.read_manifest(folder) is not None
 
 
 def _inside(path, folder):
@@ -44,9 +46,12 @@ def _inside(path, folder):
 
 def check_replaceable(folder, force, protect=()):
     """Raise :class:`ImageWriteError` unless a set may be written at ``folder``: it does not exist, or
-    ``force`` and it is one of our sets holding none of the ``protect`` paths."""
+    ``force`` and it is a real folder, one of our sets, holding none of the ``protect`` paths."""
     if not os.path.lexists(folder):
         return
+    if os.path.islink(folder):
+        raise ImageWriteError(f"'{folder}' is a symbolic link; svbrdf writes sets only into real folders "
+                              "(--force included). Remove the link or choose another folder name.")
     if not os.path.isdir(folder):
         raise ImageWriteError(f"'{folder}' is a file; choose a folder name for the texture set.")
     if not force:
@@ -56,8 +61,8 @@ def check_replaceable(folder, force, protect=()):
             raise ImageWriteError(f"'{folder}' holds the input '{p}'; --force will not replace it. "
                                   "Write the set somewhere else (-o).")
     if not is_our_set(folder):
-        raise ImageWriteError(f"'{folder}' is not a texture set written by svbrdf (it has no "
-                              f"{' or '.join(SET_MARKERS)}); --force replaces only those. Choose a new folder name.")
+        raise ImageWriteError(f"'{folder}' is not a texture set written by svbrdf (no svbrdf manifest in its "
+                              f"{ownership.MANIFEST}); --force replaces only those. Choose a new folder name.")
 
 
 @contextlib.contextmanager
@@ -76,12 +81,21 @@ def _locked(parent):
         os.close(fd)  # closing releases the lock
 
 
+def make_temporary(parent):
+    """A new temporary folder in ``parent``, named and marked as ours (:mod:`svbrdf_cli.write.ownership`)."""
+    # a plain name (the set's own may not be valid UTF-8, which image libraries cannot open)
+    tmp = tempfile.mkdtemp(prefix=f".svbrdf-{os.getpid()}-", suffix=".partial", dir=parent)
+    ownership.mark_temporary(tmp)
+    return tmp
+
+
 def write_set(folder, write_files, force, extra=None, protect=()):
     """Run ``write_files(tmp_folder) -> [names]`` and move the result to ``folder``.
 
     ``extra(tmp_folder) -> [names]``, if given, runs after ``write_files`` and adds files of its own (a
     capture's preview and record) to the same set. With ``force`` an existing set (ours, see
-    :func:`check_replaceable`) is renamed away first and deleted once the new one is in.
+    :func:`check_replaceable`) is updated: the files svbrdf wrote there are replaced by the new ones
+    (:func:`_merge`), every other file stays.
 
     Returns:
         Paths of the written files inside ``folder``.
@@ -91,38 +105,84 @@ def write_set(folder, write_files, force, extra=None, protect=()):
     check_replaceable(folder, force, protect)
     try:
         os.makedirs(parent, exist_ok=True)
-        # a plain name (the set's own may not be valid UTF-8, which image libraries cannot open)
-        tmp = tempfile.mkdtemp(prefix=f".svbrdf-{os.getpid()}-", suffix=".partial", dir=parent)
+        clean_partials(parent)
+        tmp = make_temporary(parent)
     except OSError as e:
         raise ImageWriteError(f"Could not create a folder in '{parent}': {e.strerror}. "
                               "Check the path and permissions.") from None
-    old = None
     try:
         names = write_files(tmp)
         if extra is not None:
             names = names + extra(tmp)
+        ownership.stamp_manifest(tmp)
+        if ownership.MANIFEST not in names:
+            names = names + [ownership.MANIFEST]
         os.chmod(tmp, 0o777 & ~umask())  # mkdtemp makes it 0700
         with _locked(parent):
             check_replaceable(folder, force, protect)  # again: another run may have written it meanwhile
             if os.path.lexists(folder):
-                old = tmp[: -len(".partial")] + ".old"
-                os.rename(folder, old)
-            try:
+                _merge(tmp, folder)
+            else:
+                os.remove(os.path.join(tmp, ownership.TEMP_MARKER))
                 os.rename(tmp, folder)
-            except OSError:
-                if old is not None:
-                    os.rename(old, folder)
-                    old = None
-                raise
     except OSError as e:
         raise ImageWriteError(f"Could not write the texture set '{folder}': {e.strerror or e}. "
                               "Check the path and free space.") from None
     finally:
         if os.path.isdir(tmp):
             shutil.rmtree(tmp, ignore_errors=True)
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
     return [os.path.join(folder, n) for n in names]
+
+
+def _merge(tmp, folder):
+    """Replace the set in ``folder`` (ours: checked) by the one in ``tmp``, file by file: svbrdf's
+    files there that the new set lacks are removed, the new set's files are moved in, and every file
+    the manifest does not list (or that changed since) is left as it is. Refused, before anything
+    changes, when a new file's name (or a folder on its path) is held by such a file.
+
+    A run killed midway leaves a manifest listing the old set's files and the new one's, so that the
+    next ``--force`` finds every file of ours; ``material.json`` (a complete set) goes in last."""
+    old = ownership.read_manifest(folder) or {}
+    new = ownership.files_in(tmp)
+    ours = {n for n, digest in old.items() if ownership.unchanged(os.path.join(folder, n), digest)}
+    for n in new:
+        parts = n.split("/")
+        for i in range(1, len(parts)):
+            d = os.path.join(folder, *parts[:i])
+            if os.path.lexists(d) and (os.path.islink(d) or not os.path.isdir(d)):
+                raise ImageWriteError(f"'{d}' is not svbrdf's; --force will not replace it. Move it away and "
+                                      "run again.")
+        p = os.path.join(folder, *parts)
+        if os.path.lexists(p) and n not in ours:
+            raise ImageWriteError(f"'{p}' was not written by svbrdf (or was changed since); --force will not "
+                                  "replace it. Move it away and run again.")
+    # 1. the manifest lists every file of ours, old and new, while they are swapped
+    transition = ownership.read_json(os.path.join(tmp, ownership.MANIFEST)) or {}
+    entry = dict(transition.get(ownership.MANIFEST_KEY, {}))
+    entry["files"] = {**{n: None for n in ours}, **{n: None for n in new}}
+    ownership.write_manifest(folder, dict(transition, **{ownership.MANIFEST_KEY: entry}))
+    # 2. the record first out (the set is incomplete until the end), old files the new set lacks
+    for n in sorted(ours - set(new) - {ownership.MANIFEST}, key=lambda n: n != ownership.RECORD):
+        os.remove(os.path.join(folder, *n.split("/")))
+        _prune(folder, os.path.dirname(n))
+    if ownership.RECORD in ours and ownership.RECORD in new:
+        os.remove(os.path.join(folder, ownership.RECORD))
+    # 3. the new files, the record and then the manifest last
+    last = (ownership.RECORD, ownership.MANIFEST)
+    for n in [n for n in new if n not in last] + [n for n in last if n in new]:
+        dst = os.path.join(folder, *n.split("/"))
+        os.makedirs(os.path.dirname(dst), exist_ok=True)
+        os.replace(os.path.join(tmp, *n.split("/")), dst)
+
+
+def _prune(folder, sub):
+    """Remove the folders on ``sub`` (relative to ``folder``) that are empty, deepest first."""
+    while sub:
+        try:
+            os.rmdir(os.path.join(folder, *sub.split("/")))
+        except OSError:
+            return
+        sub = os.path.dirname(sub)
 
 
 def write_text(path, text):
@@ -140,23 +200,16 @@ def write_text(path, text):
     return path
 
 
-def _alive(pid):
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # someone else's process
-        return True
-    return True
-
-
 def clean_partials(out):
-    """Remove the temporary folders that runs killed mid-write left in ``out`` (never those of a run
-    still going: their pid is in the name)."""
+    """Remove the temporary folders that runs killed mid-write on this host left in ``out``: only
+    folders :func:`svbrdf_cli.write.ownership.stale_temporary` recognises (named and marked as ours, their
+    process dead), and empty ones named as ours."""
     if not os.path.isdir(out):
         return
     for name in os.listdir(out):
-        m = _TEMPORARY.match(name)
-        stale = (m is not None and not _alive(int(m.group(1)))) or (m is None and _LEGACY.match(name) is not None)
-        if stale and os.path.isdir(os.path.join(out, name)):
-            shutil.rmtree(os.path.join(out, name), ignore_errors=True)
+        path = os.path.join(out, name)
+        if ownership.stale_temporary(path):
+            shutil.rmtree(path, ignore_errors=True)
+        elif ownership.empty_orphan(path):
+            with contextlib.suppress(OSError):
+                os.rmdir(path)

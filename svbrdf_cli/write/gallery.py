@@ -4,15 +4,23 @@
 folder as a batch resumes: it lists every complete set found there (its photo, its maps, its relit
 preview, its folder) and the inputs that failed in the latest run. The page is self-contained HTML
 and CSS referring to the sets' own files by relative paths: nothing is fetched from the network.
+
+The page carries :data:`svbrdf_cli.write.ownership.GENERATOR_META`: an ``index.html`` without it (the
+user's own page, or a folder of that name) is never replaced; the gallery is then not written, with
+a warning.
 """
 
 from __future__ import annotations
 
 import html
 import json
+import logging
 import os
 
-from svbrdf_cli.write.atomic import SET_MARKERS, write_text
+from svbrdf_cli.write import ownership
+from svbrdf_cli.write.atomic import SET_MARKERS, is_our_set, write_text
+
+log = logging.getLogger("svbrdf")
 
 #: The gallery's file name in the output folder.
 GALLERY = "index.html"
@@ -34,7 +42,7 @@ def _sets(out):
     found = []
     for name in sorted(os.listdir(out)):
         folder = os.path.join(out, name)
-        if name.startswith(".") or not os.path.isdir(folder):
+        if name.startswith(".") or not os.path.isdir(folder) or not is_our_set(folder):
             continue
         meta = {}
         for marker in SET_MARKERS:
@@ -89,7 +97,7 @@ def render(out, failures=()):
                 f'<figcaption>{html.escape(str(model))} {html.escape(str(record.get("size", "")))}</figcaption>')
         rows.append("<tr><th>" + head + "</th>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
     fails = "".join(f'<li class="err">{html.escape(f)}</li>' for f in failures)
-    return ("<!doctype html>\n<html><head><meta charset=\"utf-8\"><title>svbrdf: "
+    return ("<!doctype html>\n<html><head><meta charset=\"utf-8\">" + ownership.GENERATOR_META + "<title>svbrdf: "
             f"{html.escape(os.path.basename(os.path.abspath(out)))}</title><style>{_STYLE}</style></head><body>\n"
             f"<h1>{len(rows)} texture set{'s' if len(rows) != 1 else ''} in "
             f"{html.escape(os.path.abspath(out))}</h1>\n"
@@ -98,7 +106,17 @@ def render(out, failures=()):
 
 
 def write_gallery(out, failures=()):
-    """Write (atomically) ``out/index.html``; returns its path, or None when ``out`` is not a folder."""
+    """Write (atomically) ``out/index.html``; returns its path, or None when ``out`` is not a folder or
+    its ``index.html`` is not a gallery svbrdf wrote (a warning says so; it is left as it is)."""
     if not os.path.isdir(out):
         return None
-    return write_text(os.path.join(out, GALLERY), render(out, failures))
+    path = os.path.join(out, GALLERY)
+    if os.path.lexists(path) and not ownership.is_our_page(path):
+        log.warning("'%s' was not written by svbrdf: it is left as it is, and the gallery is not written. "
+                    "Move it away to get one.", path)
+        return None
+    try:
+        return write_text(path, render(out, failures))
+    except OSError as e:
+        log.warning("Could not write the gallery '%s': %s.", path, e.strerror or e)
+        return None

@@ -14,12 +14,14 @@ light (what the tests use).
 from __future__ import annotations
 
 import base64
+import html
 import json
 import os
 
 from svbrdf_cli import conventions as cv
+from svbrdf_cli.write import ownership
 from svbrdf_cli.write.atomic import write_text
-from svbrdf_cli.errors import MapSetError
+from svbrdf_cli.errors import ImageWriteError, MapSetError
 
 #: The viewer's file name in the set's folder.
 VIEWER = "viewer.html"
@@ -60,7 +62,7 @@ void main() {
 """
 
 _PAGE = """<!doctype html>
-<html><head><meta charset="utf-8"><title>svbrdf viewer: %(name)s</title>
+<html><head><meta charset="utf-8">%(generator)s<title>svbrdf viewer: %(name)s</title>
 <style>
 body { margin: 0; background: #1e1e1e; color: #ddd; font-family: system-ui, sans-serif; }
 #c { display: block; width: %(size)dpx; height: %(size)dpx; cursor: crosshair; }
@@ -159,12 +161,18 @@ def page(folder, size=512):
     fragment = _FRAGMENT % {"eps": f"{cv.EPS:.8f}",
                             "albedo_gamma": f"{cv.ALBEDO_GAMMA:.4f}", "image_gamma": f"{cv.IMAGE_GAMMA:.4f}",
                             "f0": f"{cv.DIELECTRIC_F0:.4f}", "half": f"{cv.SURFACE_HALF_SIZE:.4f}"}
-    return _PAGE % {"name": os.path.basename(os.path.abspath(folder)), "size": size, "maps": json.dumps(maps),
+    return _PAGE % {"name": html.escape(os.path.basename(os.path.abspath(folder))), "size": size,
+                    "maps": json.dumps(maps), "generator": ownership.GENERATOR_META,
                     "cam": json.dumps(list(cv.FLASH_POSITION)), "intensity": repr(float(cv.LIGHT_INTENSITY)),
                     "half": repr(float(cv.SURFACE_HALF_SIZE)), "cam_z": f"{cv.FLASH_POSITION[2]:.3f}",
                     "fragment": json.dumps(fragment)}
 
 
 def write_viewer(folder, size=512):
-    """Write ``folder/viewer.html`` (atomically); returns its path."""
-    return write_text(os.path.join(folder, VIEWER), page(folder, size))
+    """Write ``folder/viewer.html`` (atomically); returns its path. A ``viewer.html`` svbrdf did not write
+    is never replaced."""
+    path = os.path.join(folder, VIEWER)
+    if os.path.lexists(path) and not ownership.is_our_page(path):
+        raise ImageWriteError(f"'{path}' was not written by svbrdf; it is left as it is. Move it away to write "
+                              "the viewer.")
+    return write_text(path, page(folder, size))

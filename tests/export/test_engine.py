@@ -164,3 +164,52 @@ def test_sigterm_saves_and_exits_zero(tmp_path, small_bank):
     state = torch.load(folder / "state.pt", weights_only=False)
     assert state["step"] == int(res.stdout.split()[-1]) > 0
     assert signal.getsignal(signal.SIGTERM) is not None
+
+
+def test_a_compact_checkpoint_resumes_the_run_exactly(tmp_path, small_bank):
+    full = _run(tmp_path / "full", small_bank)
+    full.train(steps=6, evaluate=False)
+    part = _run(tmp_path / "part", small_bank)
+    part.train(steps=4, evaluate=False)  # in the aux stage: masks trained, maps not yet
+    import export.engine.run as run_mod
+
+    old = run_mod.PART_BYTES
+    run_mod.PART_BYTES = 200_000  # several parts even for these small networks
+    try:
+        part.save_compact(str(tmp_path / "compact"))
+    finally:
+        run_mod.PART_BYTES = old
+    files = sorted(os.listdir(tmp_path / "compact"))
+    assert "manifest.json" in files and sum(f.startswith("part_") for f in files) > 1
+    assert not any(k.startswith("maps.") for k in run_mod.read_compact(str(tmp_path / "compact"))["model"])
+    del part
+    import dataclasses
+
+    resumed = Run(str(tmp_path / "elsewhere"), dataclasses.replace(CFG, bank_root=small_bank, bank_count=32),
+                  log=lambda m: None, des19=[], checkpoint=str(tmp_path / "compact"))
+    assert resumed.step == 4 and resumed.stage == "aux"
+    resumed.train(steps=2, evaluate=False)
+    a, b = full.net.state_dict(), resumed.net.state_dict()
+    assert all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_the_exported_chain_matches_torch(tmp_path):
+    ort = pytest.importorskip("onnxruntime")
+    from export.engine import onnx as engine_onnx
+
+    torch.manual_seed(0)
+    net = nets.build().eval()
+    for m in (net.aux, net.maps):  # give the zero heads something to say
+        torch.nn.init.normal_(m.head.weight, std=0.01)
+    path = engine_onnx.export(net, str(tmp_path / "chain.onnx"), provenance={"test": True})
+    photo = torch.rand(1, 3, 96, 64)
+    light = torch.tensor([[0.1, 0.2, 2.4]])
+    feeds = {"photo": photo, "context": flash.context(light, light, 96)[..., :64], "base": flash.base(photo, light, light)}
+    with torch.no_grad():
+        masks, aux, maps = net(**feeds)
+    sess = ort.InferenceSession(path, providers=["CPUExecutionProvider"])
+    got = sess.run(None, {k: v.numpy() for k, v in feeds.items()})
+    want = [masks, aux.clamp(0, 1), torch.cat([maps[k] for k in cv.MAP_NAMES], 1)]
+    for g, w in zip(got, want):
+        assert g.shape == tuple(w.shape)
+        assert np.abs(g - w.numpy()).max() < 1e-4

@@ -2,12 +2,14 @@
 
 import json
 import os
+import socket
 import subprocess
 import sys
 
 import numpy as np
 import pytest
 
+from svbrdf_cli.write import ownership
 from svbrdf_cli.imageio import write_image
 from svbrdf_cli.infer.chain import installed_tiers
 
@@ -83,8 +85,11 @@ def test_batch_resumes_after_an_interruption(tmp_path):
     # process has that pid).
     assert run("capture", d / "p0.png", "-o", out)[0] == 0
     stamp = (out / "p0" / "material.json").read_text()
-    (out / ".svbrdf-999999999-abc123.partial").mkdir()
-    (out / ".svbrdf-999999999-abc123.partial" / "normal.png").write_bytes(b"half")
+    left = out / ".svbrdf-999999999-abc12345.partial"
+    left.mkdir()
+    (left / "normal.png").write_bytes(b"half")
+    (left / ownership.TEMP_MARKER).write_text(json.dumps(
+        {"tool": "svbrdf", "pid": 999999999, "token": "abc12345", "host": socket.gethostname()}))
     code, text = run("batch", d, "-o", out)
     assert code == 0 and "2 done, 1 already done" in text
     assert (out / "p0" / "material.json").read_text() == stamp  # skipped, untouched

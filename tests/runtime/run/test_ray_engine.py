@@ -67,7 +67,7 @@ def test_ray_engine_resumes(local_ray, photos, tmp_path):
     # An interrupted run: shot0 finished, shot1 killed mid-write (a temporary folder left behind).
     assert run("capture", photos / "shot0.png", "-o", out_dir)[0] == 0
     stamp = (out_dir / "shot0" / "material.json").stat().st_mtime_ns
-    (out_dir / ".svbrdf-999999999-x1.partial").mkdir()
+    (out_dir / ".svbrdf-999999999-x1x1x1x1.partial").mkdir()  # (empty: killed before its marker)
     code, out = run("batch", photos, "-o", out_dir, "--engine", "ray")
     assert code == 1 and "3 done, 1 already done, 1 failed" in out, out
     assert (out_dir / "shot0" / "material.json").stat().st_mtime_ns == stamp

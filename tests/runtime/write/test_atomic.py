@@ -2,7 +2,9 @@
 a folder of other files), concurrent runs never silently replace each other, and a run never deletes
 another live run's temporary folders."""
 
+import json
 import os
+import socket
 import subprocess
 import sys
 
@@ -12,6 +14,7 @@ import pytest
 from click.testing import CliRunner
 
 from svbrdf_cli.write import atomic
+from svbrdf_cli.write import ownership
 from svbrdf_cli.cli.main import cli
 from svbrdf_cli.errors import ImageWriteError
 from svbrdf_cli.imageio import write_image
@@ -125,14 +128,18 @@ def test_a_run_leaves_live_runs_temporaries_alone(tmp_path):
         dead_pid = subprocess.Popen([sys.executable, "-c", "pass"])
         dead_pid.wait()
         dead = out / f".svbrdf-{dead_pid.pid}-efgh5678.partial"
-        legacy = out / ".wood.k2j4h5g6.partial"
+        legacy = out / ".wood.k2j4h5g6.partial"  # the older naming: a user's folder may look like it (issue 35)
         mine = out / ".my-notes.partial"  # not a name we use: never touched
         for d in (live, dead, legacy, mine):
             d.mkdir()
+            (d / "a.txt").write_text("x")
+        for d, pid, token in ((live, sleeper.pid, "abcd1234"), (dead, dead_pid.pid, "efgh5678")):
+            (d / ownership.TEMP_MARKER).write_text(json.dumps(
+                {"tool": "svbrdf", "pid": pid, "token": token, "host": socket.gethostname()}))
         photo(tmp_path / "p.png")
         code, text = run("capture", tmp_path / "p.png", "-o", out, "--size", 256)
         assert code == 0, text
-        assert live.is_dir() and mine.is_dir() and not dead.exists() and not legacy.exists()
+        assert live.is_dir() and mine.is_dir() and legacy.is_dir() and not dead.exists()
     finally:
         sleeper.kill()
         sleeper.wait()
@@ -156,5 +163,7 @@ def test_write_set_rechecks_under_the_lock(tmp_path):
 
 def test_is_our_set(tmp_path):
     assert not atomic.is_our_set(tmp_path)
-    (tmp_path / "material.json").write_text("{}")
-    assert atomic.is_our_set(tmp_path)
+    (tmp_path / "material.json").write_text("{}")  # a name alone is not enough (issue 35)
+    assert not atomic.is_our_set(tmp_path)
+    (tmp_path / "material.json").write_text('{"tool": "svbrdf 0.1.0", "files": ["normal.png", "material.json"]}')
+    assert atomic.is_our_set(tmp_path)  # a set written before the manifest, by its record

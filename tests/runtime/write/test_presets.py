@@ -351,9 +351,11 @@ def test_refuses_to_overwrite_and_force_replaces(maps, tmp_path):
     presets.write_unreal(out, maps)
     with pytest.raises(ImageWriteError, match="already exists"):
         presets.write_unreal(out, maps)
-    (out / "stale.txt").write_text("old")
+    (out / "notes.txt").write_text("the user's")
     presets.write_gltf(out, maps, force=True)
-    assert "stale.txt" not in os.listdir(out) and "material.gltf" in os.listdir(out)
+    # the unreal files (ours) replaced by glTF's, the user's file kept (issue 35)
+    assert sorted(os.listdir(out)) == ["baseColor.png", "height.png", "material.gltf", "metallicRoughness.png",
+                                       "normal.png", "notes.txt", "texture_set.json"]
     assert os.listdir(tmp_path) == ["ue"]
 
 
