@@ -106,7 +106,7 @@ def raw_data_problem(path):
     images = tiff_images(path)
     if not images:
         return None
-    size = os.path.getsize(path)
+    size = len(path) if isinstance(path, (bytes, bytearray, memoryview)) else os.path.getsize(path)
     w, h, chunks, tags = max(images, key=lambda i: i[0] * i[1])
     if w * h == 0:
         return "its image directory lies past the end of the file" if any(c < 0 for _, c in chunks) else None

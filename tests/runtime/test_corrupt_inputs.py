@@ -87,7 +87,7 @@ def test_raw_buffers_come_fresh_for_every_decode(dng, tmp_path):
     """What LibRaw leaves unfilled is zero, never the previous photo (the data check bypassed)."""
     (tmp_path / "head500.dng").write_bytes(dng[:500])
     code = ("import sys, numpy as np, rawpy\n"
-            "from svbrdf_cli import ingest\n"
+            "from svbrdf_cli.ingest import photo as ingest\n"
             "ingest._fresh_large_buffers()\n"
             "def decode(p):\n"
             "    with rawpy.imread(p) as r:\n"

@@ -91,7 +91,7 @@ def test_only_marked_temporaries_of_dead_runs_are_removed(tmp_path):
     out.mkdir()
     dead = _dead_pid()
     # a temporary folder of a run that died (made as write_set makes them, by a process now gone)
-    code = subprocess.run([sys.executable, "-c", "import sys; from svbrdf_cli import atomic; "
+    code = subprocess.run([sys.executable, "-c", "import sys; from svbrdf_cli.write import atomic; "
                            "t = atomic.make_temporary(sys.argv[1]); open(t + '/normal.png', 'wb').write(b'half')",
                            str(out)], env=ENV).returncode
     assert code == 0
