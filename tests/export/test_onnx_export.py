@@ -83,7 +83,7 @@ def test_runtime_chain_matches_torch(tmp_path):
     pad = ((m, m + (-(70 + 2 * m)) % 32), (m, m + (-(90 + 2 * m)) % 32), (0, 0))
     chw = lambda a: torch.from_numpy(np.ascontiguousarray(a.transpose(2, 0, 1)))[None]  # noqa: E731
     with torch.no_grad():
-        ref = net(chw(np.pad(img, pad, mode="reflect")), physical=chw(np.pad(network_input(img), pad, mode="reflect")))
+        ref = net(chw(np.pad(img, pad, mode="reflect")), physical=chw(np.pad(network_input(img)[0], pad, mode="reflect")))
     for k, v in out.items():
         r = ref[k][0].numpy().transpose(1, 2, 0)[m:m + 70, m:m + 90]
         assert v.shape == r.shape, k
