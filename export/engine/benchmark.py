@@ -152,6 +152,3 @@ def main(tier="swift", threads=1, log=print):
     log(f"samples/s={min(r[4] for r in rows):.1f} size={size}")
     return rows
 
-
-if __name__ == "__main__":
-    main(threads=int(os.environ.get("THREADS", "1")))
