@@ -406,6 +406,45 @@ def load_trained(out, tier=None, device="cpu", stages=STAGES):
     return net.eval()
 
 
+def benchmark_rows(tier="fast", size=128, batch=16, repeats=2, log=print):
+    """The same rows for a tier of the first training loop (:mod:`export.train`: samples made from
+    scratch by :func:`export.data.dataset.make_batch`, the numpy physical estimate per sample, fp32),
+    on a throw-away run folder; the baseline the engine is measured against."""
+    import contextlib
+    import io
+    import tempfile
+
+    from export.engine import benchmark as engine_benchmark
+
+    import sys
+
+    old = sys.modules[__name__]
+    rows = []
+    with tempfile.TemporaryDirectory() as out:
+        cfg = old.RunConfig(tier=tier, size=size, batch=batch)
+        for stage in old.VARIANTS[old.tier_variant(tier)]:
+            with contextlib.redirect_stdout(io.StringIO()):
+                t = old.StageTrainer(stage, out, cfg)
+            ready = t.batch()
+
+            def step(b=None):
+                t.net.eval()
+                t.net.stage(stage).train()
+                t.opt.zero_grad()
+                total, _, _ = t.losses(b if b is not None else ready)
+                total.backward()
+                t.opt.step()
+
+            data = engine_benchmark.rate(t.batch, batch, repeats)
+            stepped = engine_benchmark.rate(step, batch, repeats)
+            loop = engine_benchmark.rate(t.train_step, batch, repeats)
+            params = sum(p.numel() for p in t.net.stage(stage).parameters())
+            rows.append((stage, params, data, stepped, loop))
+            log(f"{stage}: data {data:.1f}/s, step {stepped:.1f}/s, loop {loop:.1f}/s")
+            t.save()  # the next stage loads this one, frozen
+    return rows, size
+
+
 @click.command()
 @click.option("--benchmark", is_flag=True,
               help="Measure data, step and whole-loop samples/s of every stage of the tier (default swift, the "
@@ -447,7 +486,8 @@ def cli(benchmark, stage, tier, out, steps, minutes, batch, size, device, seed, 
     if benchmark:
         from export.engine import benchmark as engine_benchmark
 
-        engine_benchmark.main(tier or "swift", threads or 1, log=click.echo)
+        rows = benchmark_rows(tier, log=lambda m: None) if tier not in (None, "swift") else None
+        engine_benchmark.main(tier or "swift", threads or 1, log=click.echo, rows=rows)
         return
     tier = tier or "fast"
     if tier == "swift":

@@ -8,7 +8,7 @@ does; for the maps stage, with its share of self-supervised steps on real photos
 ``samples/s=<the slowest stage's loop rate> size=<training size>``.
 
 ``--tier fast`` (or ``lite``) measures the same for a tier of the first training loop
-(:mod:`export.train`, :func:`measure_old`): the baseline.
+(:func:`export.train.benchmark_rows`): the baseline.
 
 Without a material bank it grows a small one in a temporary folder (two shards; a few seconds).
 """
@@ -37,7 +37,7 @@ def _bank(log):
     return bank_mod.Bank(tmp)
 
 
-def _rate(fn, batch, repeats):
+def rate(fn, batch, repeats):
     """Samples per second of this process's CPU time (on one thread, its wall time when nothing else
     runs; on a shared machine, what one core of its own would give)."""
     fn()  # warm-up
@@ -79,9 +79,9 @@ def measure(tier="swift", size=None, batch=None, repeats=4, log=print):
             loss.backward()
             opt.step()
 
-        data = _rate(lambda: batches.make(bank, g, batch, size, stage), batch, repeats)
-        stepped = _rate(step, batch, repeats)
-        loop = _rate(lambda: step(batches.make(bank, g, batch, size, stage)), batch, repeats)
+        data = rate(lambda: batches.make(bank, g, batch, size, stage), batch, repeats)
+        stepped = rate(step, batch, repeats)
+        loop = rate(lambda: step(batches.make(bank, g, batch, size, stage)), batch, repeats)
         real = _real_photos(log) if stage == "maps" and cfg.real_fraction > 0 else None
         if real:  # as training runs it: a share of the steps are real photos (no rendering of the data)
             def real_step():
@@ -91,47 +91,12 @@ def measure(tier="swift", size=None, batch=None, repeats=4, log=print):
                 loss.backward()
                 opt.step()
 
-            real_rate = _rate(real_step, batch, repeats)
+            real_rate = rate(real_step, batch, repeats)
             log(f"maps: real-photo steps {real_rate:.1f}/s, synthetic {loop:.1f}/s")
             loop = 1.0 / ((1 - cfg.real_fraction) / loop + cfg.real_fraction / real_rate)
         params = sum(p.numel() for p in module.parameters())
         rows.append((stage, params, data, stepped, loop))
         log(f"{stage}: {params / 1e6:.2f} M parameters, data {data:.1f}/s, step {stepped:.1f}/s, loop {loop:.1f}/s")
-    return rows, size
-
-
-def measure_old(tier="fast", size=128, batch=16, repeats=2, log=print):
-    """The same rows for a tier of the first training loop (:mod:`export.train`: samples made from
-    scratch by :func:`export.data.dataset.make_batch`, the numpy physical estimate per sample, fp32),
-    on a throw-away run folder; the baseline the engine is measured against."""
-    import contextlib
-    import io
-
-    from export import train as old
-
-    rows = []
-    with tempfile.TemporaryDirectory() as out:
-        cfg = old.RunConfig(tier=tier, size=size, batch=batch)
-        for stage in old.VARIANTS[old.tier_variant(tier)]:
-            with contextlib.redirect_stdout(io.StringIO()):
-                t = old.StageTrainer(stage, out, cfg)
-            ready = t.batch()
-
-            def step(b=None):
-                t.net.eval()
-                t.net.stage(stage).train()
-                t.opt.zero_grad()
-                total, _, _ = t.losses(b if b is not None else ready)
-                total.backward()
-                t.opt.step()
-
-            data = _rate(t.batch, batch, repeats)
-            stepped = _rate(step, batch, repeats)
-            loop = _rate(t.train_step, batch, repeats)
-            params = sum(p.numel() for p in t.net.stage(stage).parameters())
-            rows.append((stage, params, data, stepped, loop))
-            log(f"{stage}: data {data:.1f}/s, step {stepped:.1f}/s, loop {loop:.1f}/s")
-            t.save()  # the next stage loads this one, frozen
     return rows, size
 
 
@@ -142,12 +107,14 @@ def table(rows, size, threads):
     return "\n".join(lines)
 
 
-def main(tier="swift", threads=1, log=print):
+def main(tier="swift", threads=1, log=print, rows=None):
+    """Print the table and the last line; ``rows`` measured elsewhere (the first loop's) or by :func:`measure`."""
     torch.set_num_threads(threads)
-    if tier == "swift":
-        rows, size = measure(tier, log=lambda m: None)
-    else:
-        rows, size = measure_old(tier, log=lambda m: None)
+    if rows is not None:
+        log(table(rows[0], rows[1], threads))
+        log(f"samples/s={min(r[4] for r in rows[0]):.1f} size={rows[1]}")
+        return rows[0]
+    rows, size = measure(tier, log=lambda m: None)
     log(table(rows, size, threads))
     log(f"samples/s={min(r[4] for r in rows):.1f} size={size}")
     return rows
