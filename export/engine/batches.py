@@ -82,27 +82,13 @@ def tint(maps, g, hue=0.05, saturation=(0.8, 1.5), brightness=0.3):
     return out
 
 
-def auto_exposure(unit, target, stride=4, iterations=20):
-    """(B,) intensities giving the encoded image ``unit * intensity`` a mean of ``target`` (B,),
-    by bisection on every ``stride``-th pixel of the unit-intensity render."""
-    lin = unit[..., ::stride, ::stride]
-    lo = torch.full((lin.shape[0],), -8.0, dtype=lin.dtype)
-    hi = torch.full_like(lo, 12.0)
-    for _ in range(iterations):
-        mid = (lo + hi) / 2
-        bright = cv.image_to_encoded(lin * mid.exp().reshape(-1, 1, 1, 1)).mean((1, 2, 3)) < target
-        lo = torch.where(bright, mid, lo)
-        hi = torch.where(bright, hi, mid)
-    return ((lo + hi) / 2).exp()
-
-
 def photograph(maps, capture, g):
     """The simulated photo of a batch (:func:`export.data.simulate.photograph`'s camera model, with
     one render and auto exposure on a subsample): ``photo``, the clean ``linear`` flash image, ``intensity`` (B,)."""
     d = maps["diffuse"]
     cam, light = capture["camera"].to(d), capture["light"].to(d)
     unit = render_maps(maps, light=light, camera=cam, intensity=1.0)
-    intensity = auto_exposure(unit, capture["exposure"].to(d))
+    intensity = render_targets.exposure_of(unit[..., ::4, ::4], capture["exposure"].to(d), iterations=20)
     power = capture["power"].to(d)
     intensity = torch.where(power > 0, power, intensity)
     linear = unit * intensity.reshape(-1, 1, 1, 1)

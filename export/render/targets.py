@@ -75,16 +75,21 @@ def auto_exposure(maps, light=cv.FLASH_POSITION, target=cv.AUTO_EXPOSURE_MEAN, i
         (B,) intensities.
     """
     with torch.no_grad():
-        lin = render_maps(maps, light=light, camera=camera, intensity=1.0)
-        lo = torch.full((lin.shape[0],), -8.0, dtype=lin.dtype, device=lin.device)
-        hi = torch.full_like(lo, 12.0)
-        target_t = torch.as_tensor(target, dtype=lin.dtype, device=lin.device)  # float or (B,)
-        for _ in range(iterations):
-            mid = (lo + hi) / 2
-            bright = cv.image_to_encoded(lin * mid.exp().reshape(-1, 1, 1, 1)).mean((1, 2, 3)) < target_t
-            lo = torch.where(bright, mid, lo)
-            hi = torch.where(bright, hi, mid)
-        return ((lo + hi) / 2).exp()
+        return exposure_of(render_maps(maps, light=light, camera=camera, intensity=1.0), target, iterations)
+
+
+def exposure_of(unit, target=cv.AUTO_EXPOSURE_MEAN, iterations=24):
+    """(B,) intensities giving the encoded image ``unit * intensity`` a mean of ``target`` (float or
+    (B,)): bisection on the log intensity of a (B, C, H, W) unit-intensity linear render."""
+    lo = torch.full((unit.shape[0],), -8.0, dtype=unit.dtype, device=unit.device)
+    hi = torch.full_like(lo, 12.0)
+    target_t = torch.as_tensor(target, dtype=unit.dtype, device=unit.device)
+    for _ in range(iterations):
+        mid = (lo + hi) / 2
+        bright = cv.image_to_encoded(unit * mid.exp().reshape(-1, 1, 1, 1)).mean((1, 2, 3)) < target_t
+        lo = torch.where(bright, mid, lo)
+        hi = torch.where(bright, hi, mid)
+    return ((lo + hi) / 2).exp()
 
 
 def bumpiness_flattened(maps, light=cv.FLASH_POSITION, intensity=cv.LIGHT_INTENSITY, camera=None):
