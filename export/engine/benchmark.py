@@ -22,6 +22,7 @@ import time
 import torch
 
 from export.engine import bank as bank_mod
+from export.engine import keep_memory
 from export.engine import batches, nets
 from export.engine import real as real_mod
 from export.engine.run import RunConfig, real_loss, stage_loss
@@ -110,6 +111,7 @@ def table(rows, size, threads):
 def main(tier="swift", threads=1, log=print, rows=None):
     """Print the table and the last line; ``rows`` measured elsewhere (the first loop's) or by :func:`measure`."""
     torch.set_num_threads(threads)
+    keep_memory()
     if rows is not None:
         log(table(rows[0], rows[1], threads))
         log(f"samples/s={min(r[4] for r in rows[0]):.1f} size={rows[1]}")

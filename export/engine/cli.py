@@ -15,6 +15,7 @@ from __future__ import annotations
 import click
 
 from export.engine import bank as bank_mod
+from export.engine import keep_memory
 
 #: The committed compact checkpoint of the current run (export.engine.run.write_compact).
 CHECKPOINT = "weights/checkpoints/swift-run"
@@ -43,6 +44,7 @@ def _setup(threads):
 
     torch.set_num_threads(threads)
     torch.set_num_interop_threads(1)
+    keep_memory()
 
 
 @main.command()

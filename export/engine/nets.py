@@ -78,6 +78,8 @@ class S2DNet(nn.Module):
             nn.init.zeros_(self.head.bias)
 
     def forward(self, x):
+        if torch.is_autocast_enabled("cpu"):  # the stem casts it anyway: change the layout of half the bytes
+            x = x.to(torch.get_autocast_dtype("cpu"))
         x = self.stem(x.contiguous(memory_format=torch.channels_last))
         skips = [x]
         for down in self.down:
