@@ -56,14 +56,17 @@ def _setup(threads):
 @click.option("--eval-minutes", type=float, default=None, help="Evaluate every this many minutes (default 30).")
 @click.option("--checkpoint", default=CHECKPOINT, show_default=True,
               help="Committed compact checkpoint to resume from when FOLDER holds no state.")
-def train(folder, threads, steps, minutes, checkpoint_minutes, eval_minutes, checkpoint):
+@click.option("--schedule", default=None, callback=lambda ctx, p, v: _schedule(v),
+              help="Samples per stage, e.g. masks=300000,aux=200000,maps=3000000 (default: the run's own).")
+def train(folder, threads, steps, minutes, checkpoint_minutes, eval_minutes, checkpoint, schedule):
     """Train the swift chain in FOLDER, or resume it; SIGTERM/SIGINT save and exit 0."""
     import dataclasses
 
-    from export.engine.run import Run
+    from export.engine.run import Run, RunConfig
 
     _setup(threads)
-    run = Run(folder, log=lambda m: click.echo(m, err=True), checkpoint=checkpoint)
+    config = dataclasses.replace(RunConfig(), schedule=schedule) if schedule else None
+    run = Run(folder, config=config, log=lambda m: click.echo(m, err=True), checkpoint=checkpoint)
     changes = {k: v for k, v in (("checkpoint_minutes", checkpoint_minutes), ("eval_minutes", eval_minutes))
                if v is not None}
     if changes:
@@ -74,9 +77,26 @@ def train(folder, threads, steps, minutes, checkpoint_minutes, eval_minutes, che
     click.echo(f"run {folder}: saved at step {run.step} ({run.samples} samples)", err=True)
 
 
+def _schedule(text):
+    """``masks=300000,aux=200000,maps=3000000`` -> the schedule tuple (stages in the chain's order)."""
+    if not text:
+        return None
+    from export.engine.nets import STAGES
+
+    try:
+        pairs = [(k.strip(), int(v)) for k, v in (item.split("=") for item in text.split(","))]
+    except ValueError:
+        raise click.BadParameter(f"{text!r}: write stage=samples pairs, e.g. masks=300000,aux=200000,maps=3000000")
+    if [k for k, _ in pairs] != list(STAGES) or any(v <= 0 for _, v in pairs):
+        raise click.BadParameter(f"{text!r}: give every stage ({', '.join(STAGES)}) in that order, each a positive count")
+    return tuple(pairs)
+
+
 @main.command()
 @click.option("--run", "folder", default="runs/swift", show_default=True)
-def background(folder):
+@click.option("--schedule", default=None, callback=lambda ctx, p, v: (_schedule(v), v)[1],
+              help="Passed to train: samples per stage (default: the run's own).")
+def background(folder, schedule):
     """Resume (or start) the run in FOLDER detached, on one core; its log is FOLDER/log.txt."""
     import os
     import subprocess
@@ -93,7 +113,8 @@ def background(folder):
             pass
     env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
     with open(os.path.join(folder, "log.txt"), "a") as log:
-        p = subprocess.Popen([sys.executable, "-m", "export.engine", "train", "--run", folder, "--threads", "1"],
+        args = [sys.executable, "-m", "export.engine", "train", "--run", folder, "--threads", "1"]
+        p = subprocess.Popen(args + (["--schedule", schedule] if schedule else []),
                              stdout=log, stderr=log, stdin=subprocess.DEVNULL, start_new_session=True, env=env)
     with open(pid_file, "w") as f:
         f.write(str(p.pid))

@@ -145,6 +145,25 @@ def test_a_run_stopped_and_resumed_equals_the_run_that_never_stopped(tmp_path, s
     assert not all(torch.equal(a[k], nets.build().state_dict()[k]) for k in a)  # it did train
 
 
+def test_a_schedule_given_on_resume_is_the_runs_from_then_on(tmp_path, small_bank):
+    from click.testing import CliRunner
+
+    from export.engine.cli import main
+
+    run = _run(tmp_path / "run", small_bank)
+    run.train(steps=4, evaluate=False)  # 3 masks steps, one aux step: 2 of the aux stage's 4 samples
+    assert run.stage == "aux"
+    del run
+    res = CliRunner().invoke(main, ["train", "--run", str(tmp_path / "run"), "--steps", "1", "--checkpoint", "",
+                                    "--schedule", "masks=6,aux=2,maps=4"])
+    assert res.exit_code == 0, res.output
+    resumed = Run(str(tmp_path / "run"), log=lambda m: None, des19=[])  # the run's saved configuration
+    assert resumed.config.schedule == (("masks", 6), ("aux", 2), ("maps", 4))
+    assert resumed.stage == "maps" and resumed.step == 5  # the aux stage had its 2 samples: one maps step
+    res = CliRunner().invoke(main, ["train", "--run", str(tmp_path / "run"), "--schedule", "aux=2,masks=6,maps=4"])
+    assert res.exit_code == 2 and "in that order" in res.output
+
+
 def test_sigterm_saves_and_exits_zero(tmp_path, small_bank):
     folder = tmp_path / "run"
     code = (
