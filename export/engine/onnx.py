@@ -7,8 +7,9 @@
 outputs ``masks`` (1, 6, H, W), ``aux`` (1, 9, H, W) and ``maps`` (1, 10, H, W): normal (3),
 diffuse (3), roughness (1), specular (3) in the stored encoding. H and W are dynamic, multiples of
 32 (a depth-4 UNet at half size). fp32 throughout (the training's bf16 is for speed only); the
-graph matches torch in fp32 (``tests/export/test_engine.py``). Its metadata holds the run's
-provenance (samples seen, CPU hours, the last Des19 scores).
+graph matches torch in fp32 (``tests/export/test_engine.py``). Its metadata holds the conventions
+version, the size multiple and the run's provenance (samples seen, CPU hours, the last Des19
+scores); :class:`svbrdf_cli.infer.swift.SwiftModel` runs it.
 """
 
 from __future__ import annotations
@@ -45,13 +46,13 @@ def export(net, path, provenance=None, size=128):
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     torch.onnx.export(_Graph(net), x, path, input_names=list(INPUTS), output_names=list(OUTPUTS),
                       dynamic_axes=dyn, opset_version=OPSET, dynamo=False)
-    if provenance is not None:
-        import onnx
+    import onnx
 
-        model = onnx.load(path)
+    model = onnx.load(path)
+    meta = {"conventions": cv.CONVENTIONS_VERSION, "size_multiple": str(SIZE_MULTIPLE), "tier": "swift",
+            "provenance": json.dumps(provenance or {})}
+    for key, value in meta.items():
         entry = model.metadata_props.add()
-        entry.key, entry.value = "provenance", json.dumps(provenance)
-        entry = model.metadata_props.add()
-        entry.key, entry.value = "size_multiple", str(SIZE_MULTIPLE)
-        onnx.save(model, path)
+        entry.key, entry.value = key, value
+    onnx.save(model, path)
     return path

@@ -34,11 +34,23 @@ TIERS = ("lite", "fast", "balanced", "best")
 PHYSICAL_INPUT = "physical"
 
 
+def padding(h, w, multiple):
+    """(margin, np.pad widths, np.pad mode) around an (h, w) network input: a reflected margin of
+    :data:`BORDER_MARGIN`, then up to ``multiple``. The networks' zero padding then shapes the margin,
+    which is cropped off, instead of the maps' own border."""
+    m = min(BORDER_MARGIN, h - 1, w - 1)
+    ph, pw = -(h + 2 * m) % multiple, -(w + 2 * m) % multiple
+    pad = ((m, m + ph), (m, m + pw), (0, 0))
+    return m, pad, ("reflect" if (m + ph < h and m + pw < w) else "edge")
+
+
 class ModelError(SvbrdfError):
     """A model folder is missing, incomplete or made for other conventions."""
 
 
-def _session(path, threads):
+def session(path, threads):
+    """An onnxruntime session of ``path`` on ``threads`` threads (0: onnxruntime's choice); a
+    :class:`ModelError` naming the file when it cannot load."""
     import onnxruntime as ort
 
     opts = ort.SessionOptions()
@@ -82,7 +94,7 @@ class Chain:
                              "python -m export.onnx_export.")
         for stage in self.stages:
             path = os.path.join(self.folder, f"{stage}.onnx")
-            sess = _session(path, threads)
+            sess = session(path, threads)
             meta = sess.get_modelmeta().custom_metadata_map
             if meta.get("conventions") != cv.CONVENTIONS_VERSION:
                 raise ModelError(f"'{path}' was made for conventions version {meta.get('conventions')!r}, "
@@ -143,12 +155,7 @@ class Chain:
         if img.ndim != 3 or img.shape[-1] != 3:
             raise ValueError(f"expected an (H, W, 3) image, got shape {img.shape}")
         h, w = img.shape[:2]
-        # A reflected margin, then up to the size multiple: the networks' zero padding then shapes the
-        # margin, which is cropped off, instead of the maps' own border.
-        m = min(BORDER_MARGIN, h - 1, w - 1)
-        ph, pw = -(h + 2 * m) % self.multiple, -(w + 2 * m) % self.multiple
-        pad = ((m, m + ph), (m, m + pw), (0, 0))
-        mode = "reflect" if (m + ph < h and m + pw < w) else "edge"
+        m, pad, mode = padding(h, w, self.multiple)
         x = np.ascontiguousarray(np.pad(img, pad, mode=mode).transpose(2, 0, 1)[None])
         feeds = {"photo": x}
         if any(PHYSICAL_INPUT in self.meta[s]["inputs"].split(",") for s in self.stages):

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 
+from svbrdf_cli.infer import swift
 from svbrdf_cli.infer.chain import MODELS_DIR, TIERS, Chain, ModelError, installed_tiers
 from svbrdf_cli.infer.physical import NAME as PHYSICAL
 #: What ``svbrdf capture`` runs without ``--model``: the physical estimate, until a trained
@@ -37,7 +38,8 @@ def model_folder(model):
 def load_model(model, threads=0):
     """What ``--model`` names, ready to run: a :class:`svbrdf_cli.infer.chain.Chain`, or for ``auto`` an
     :class:`svbrdf_cli.infer.auto.AutoModel`, for ``physical`` a
-    :class:`svbrdf_cli.infer.physical.PhysicalModel` (same call interface)."""
+    :class:`svbrdf_cli.infer.physical.PhysicalModel`, for a folder holding ``chain.onnx`` a
+    :class:`svbrdf_cli.infer.swift.SwiftModel` (same call interface)."""
     if model == AUTO:
         from svbrdf_cli.infer.auto import AutoModel
 
@@ -46,7 +48,10 @@ def load_model(model, threads=0):
         from svbrdf_cli.infer.physical import PhysicalModel
 
         return PhysicalModel()
-    return Chain(model_folder(model), threads=threads)
+    folder = model_folder(model)
+    if swift.is_swift(folder):
+        return swift.SwiftModel(folder, threads=threads)
+    return Chain(folder, threads=threads)
 
 
 def check_model(model):

@@ -14,6 +14,7 @@ from export.engine import batches, flash, nets
 from export.engine.run import Run, RunConfig
 from export.render import targets as render_targets
 from svbrdf_cli import conventions as cv
+from svbrdf_cli.infer import flash_fields
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -88,8 +89,8 @@ def test_flash_context_and_base_agree_with_numpy():
     light = torch.tensor([[0.2, -0.1, 2.5], [-0.4, 0.3, 1.8]])
     ctx, base = flash.context(light, light, 32), flash.base(photo, light, light)
     for i in range(2):
-        c = flash.context_numpy(light[i].numpy(), 32)
-        b = flash.base_numpy(photo[i].permute(1, 2, 0).numpy(), light[i].numpy())
+        c = flash_fields.context(light[i].numpy(), 32)
+        b = flash_fields.base(photo[i].permute(1, 2, 0).numpy(), light[i].numpy())
         assert np.allclose(ctx[i].permute(1, 2, 0).numpy(), c, atol=1e-5)
         assert np.allclose(base[i].permute(1, 2, 0).numpy(), b, atol=1e-4)
 
@@ -232,3 +233,45 @@ def test_the_exported_chain_matches_torch(tmp_path):
     for g, w in zip(got, want):
         assert g.shape == tuple(w.shape)
         assert np.abs(g - w.numpy()).max() < 1e-4
+
+
+def test_the_runtime_runs_the_exported_chain_as_torch_does(tmp_path):
+    pytest.importorskip("onnxruntime")
+    from click.testing import CliRunner
+
+    from export.engine import onnx as engine_onnx
+    from svbrdf_cli.cli.main import cli
+    from svbrdf_cli.infer.chain import padding
+    from svbrdf_cli.infer.registry import load_model
+
+    torch.manual_seed(0)
+    net = nets.build().eval()
+    for m in (net.aux, net.maps):  # give the zero heads something to say
+        torch.nn.init.normal_(m.head.weight, std=0.01)
+    folder = tmp_path / "swift"
+    engine_onnx.export(net, str(folder / "chain.onnx"), provenance={"samples": 7})
+    model = load_model(str(folder))
+    g = torch.Generator().manual_seed(3)
+    photo = (0.3 + 0.4 * torch.rand(1, 3, 96, 96, generator=g)).clamp(0, 1)
+    img = photo[0].permute(1, 2, 0).numpy()
+    out = model(img)
+    light = torch.from_numpy(model.flash(img)).float()[None]
+    m, pad, mode = padding(96, 96, 32)  # the runtime's reflected margin, made here the same way
+
+    def padded(x):
+        return torch.from_numpy(np.pad(x[0].permute(1, 2, 0).numpy(), pad, mode=mode)).permute(2, 0, 1)[None]
+
+    with torch.no_grad():
+        masks, aux, maps = net(padded(photo), padded(flash.context(light, light, 96)),
+                               padded(flash.base(photo, light, light)))
+    for k in cv.MAP_NAMES:
+        want = maps[k][0].permute(1, 2, 0).numpy()[m:m + 96, m:m + 96]
+        assert np.abs(out[k] - want).max() < 1e-3, k
+    assert np.abs(out["M_h"] - masks[0, 3:].permute(1, 2, 0).numpy()[m:m + 96, m:m + 96]).max() < 1e-3
+    assert np.abs(out["I_hr2"] - aux[0, 6:].clamp(0, 1).permute(1, 2, 0).numpy()[m:m + 96, m:m + 96]).max() < 1e-3
+    assert model.describe()["trained"] == {"samples": 7}
+    res = CliRunner().invoke(cli, ["capture", os.path.join(ROOT, "examples", "glazed_tiles.jpg"), "-o",
+                                   str(tmp_path / "out"), "--model", str(folder), "--debug", "--size", "256"])
+    assert res.exit_code == 0, res.output
+    debug = sorted(os.listdir(tmp_path / "out" / "glazed_tiles" / "debug"))
+    assert {"M_b.png", "M_h.png", "I_bf.png", "I_hr.png", "I_hr2.png"} <= set(debug), debug
