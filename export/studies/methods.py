@@ -58,13 +58,14 @@ class Physical:
 
 
 class Network:
-    """An exported model folder run by the runtime's :class:`svbrdf_cli.infer.chain.Chain`."""
+    """An exported model folder run as the runtime runs it (:func:`svbrdf_cli.infer.registry.load_model`:
+    per-stage networks, or a swift ``chain.onnx``)."""
 
     def __init__(self, name, folder, label=None, threads=0):
-        from svbrdf_cli.infer.chain import Chain
+        from svbrdf_cli.infer.registry import load_model
 
         self.name, self.label = name, label or name
-        self.chain = Chain(folder, threads=threads)
+        self.chain = load_model(os.fspath(folder), threads=threads)
 
     def __call__(self, image):
         out = self.chain(image)
