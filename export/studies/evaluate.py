@@ -109,7 +109,7 @@ def score(gt_root, pred_root=None, prefix=""):
         + (["--prefix", prefix] if prefix else [])
     res = subprocess.run(cmd, capture_output=True, text=True)
     line = res.stdout.strip().splitlines()[-1] if res.stdout.strip() else res.stderr.strip()
-    vals = dict(re.findall(r"(normal|diffuse|roughness|specular)=([0-9.]+)", line))
+    vals = dict(re.findall(r"(normal|relief|diffuse|roughness|specular)=(-?[0-9.]+)", line))
     return {k: float(v) for k, v in vals.items()}, line
 
 
