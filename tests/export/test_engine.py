@@ -8,6 +8,7 @@ import sys
 import numpy as np
 import pytest
 import torch
+import torch.nn.functional as F
 
 from export.engine import bank as bank_mod
 from export.engine import batches, flash, nets
@@ -67,6 +68,23 @@ def test_a_batch_has_what_each_stage_needs(small_bank):
             assert b[k].shape == (3, 3, 64, 64) and torch.isfinite(b[k]).all(), k
     assert set(cv.MAP_NAMES) <= set(b)
     assert 0.05 < float(b["photo"].mean()) < 0.95
+
+
+def test_relief_scale_keeps_the_direction_and_changes_the_depth(small_bank):
+    bank = bank_mod.Bank(small_bank)
+    stored = bank.stored(torch.arange(4))
+    g = torch.Generator().manual_seed(5)
+    out = bank_mod.linearize(batches.relief_scale(stored, g, 0.5, 0.5))
+    before = bank_mod.linearize(stored)["normal"]
+    tilt = lambda n: n[:, :2].norm(dim=1)  # noqa: E731
+    steep = tilt(before) > 0.1
+    assert (tilt(out["normal"])[steep] < tilt(before)[steep]).all()  # shallower
+    cos = (F.normalize(out["normal"][:, :2], dim=1) * F.normalize(before[:, :2], dim=1)).sum(1)
+    assert (cos[steep] > 0.999).all()  # the same way
+    assert torch.allclose(out["normal"].norm(dim=1), torch.ones(()), atol=1e-5)
+    a = batches.relief_scale(stored, torch.Generator().manual_seed(1))["normal"]
+    b = batches.relief_scale(stored, torch.Generator().manual_seed(1))["normal"]
+    assert torch.equal(a, b)
 
 
 def test_fast_highlight_removed_matches_the_reference(small_bank):
