@@ -62,6 +62,21 @@ IMAGE_GAMMA = 2.2
 #: specular to metallic workflows).
 DIELECTRIC_F0 = 0.04
 
+#: F0 (brightness) up to this is a dielectric's, whatever its tint: water 0.02, plastics, lacquer,
+#: glass and stone 0.04-0.05, gemstones up to about 0.08. Metals reflect 0.5 and more (iron 0.56,
+#: gold, copper, aluminium 0.9). From DIELECTRIC_MAX_F0 to METAL_MIN_F0 a material is read as
+#: more and more metal (a smoothstep, :func:`metal_weight`): the metallic conversion and
+#: ``--refine``'s coloured F0 use it.
+DIELECTRIC_MAX_F0 = 0.08
+METAL_MIN_F0 = 0.16
+
+
+def metal_weight(f0_level):
+    """0 for an F0 level (brightness) up to :data:`DIELECTRIC_MAX_F0`, 1 from :data:`METAL_MIN_F0`, a
+    smoothstep between (no edge where the level crosses a line)."""
+    t = np.clip((np.asarray(f0_level) - DIELECTRIC_MAX_F0) / (METAL_MIN_F0 - DIELECTRIC_MAX_F0), 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
 #: Smallest roughness the renderer evaluates. alpha = r^2 would reach 0 and
 #: make GGX a Dirac delta; this keeps r = 0 finite (alpha = 1e-4).
 MIN_ROUGHNESS = 0.01

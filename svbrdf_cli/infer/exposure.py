@@ -38,3 +38,25 @@ def network_input(linear, gain_ev=None):
     if gain_ev is None:
         gain_ev = auto_exposure_gain(low)
     return ingest.encode_for_network(low, 2.0 ** gain_ev)
+
+
+#: The albedo convention of ``svbrdf capture`` (``docs/conventions.md``, "The albedo level"): a diffuse
+#: read at the flash power :data:`svbrdf_cli.conventions.FLASH_INTENSITY` from the photo as exposed for
+#: the networks is scaled to the photo's own level, de-lit: the highlight taken off and every pixel lit
+#: as the point straight under the flash. This is the factor at that point (the flat surface's
+#: shading there, ``1 / CAMERA_HEIGHT^2`` at any fitted flash height, times the flash power and the
+#: share ``1 - F0`` the diffuse lobe keeps).
+DELIT_FACTOR = cv.FLASH_INTENSITY * (1.0 - cv.DIELECTRIC_F0) / cv.CAMERA_HEIGHT ** 2
+
+
+def photo_level(gain_ev, manual=False):
+    """The factor taking a diffuse read at the convention's flash power, from the photo exposed by
+    ``gain_ev`` stops, to the photo's own level de-lit (:data:`DELIT_FACTOR`): the photo as shot, or with
+    ``manual`` (``--exposure STOPS``) the photo as the user exposed it."""
+    return float(DELIT_FACTOR * (1.0 if manual else 2.0 ** -gain_ev))
+
+
+def to_photo_level(stored, scale):
+    """``stored`` maps with the diffuse (stored encoding) scaled by ``scale`` in linear units, clipped to 1."""
+    lin = cv.albedo_to_linear(np.asarray(stored["diffuse"], np.float32)) * np.float32(scale)
+    return dict(stored, diffuse=cv.albedo_to_stored(np.clip(lin, 0.0, 1.0)).astype(np.float32))

@@ -53,7 +53,7 @@ from svbrdf_cli.rectify import highlight
 
 #: Bumped whenever the estimate's output changes: a network trained to refine one version
 #: must be fed that version (written into exported models and checked when they load).
-PHYSICAL_VERSION = "7"
+PHYSICAL_VERSION = "8"
 
 #: Roughness values the lobe fit tries (the lobe's width picks one).
 ROUGHNESS_GRID = np.linspace(0.08, 1.0, 47)
@@ -75,6 +75,9 @@ HIGHLIGHT_SHARE = 0.8
 #: Under the highlight the fill takes the photo's texture (its brightness over its neighbourhood's),
 #: within this factor either way.
 DETAIL_RANGE = 1.5
+#: The fill under the highlight takes the photo's fine detail (:func:`_fill_with_detail`) within this
+#: factor of the fill's brightness either way.
+FILL_DETAIL_RANGE = 3.0
 #: Under the highlight, subtracting white leaves the weakest channel at least this
 #: fraction of its value (so no channel empties and the hue is kept).
 SUBTRACT_FLOOR = 0.25
@@ -418,6 +421,46 @@ def _relative_texture(lum):
     return np.clip(lum / np.maximum(blur(lum, max(1.0, w / 64.0)), 1e-6), 1.0 / DETAIL_RANGE, DETAIL_RANGE)
 
 
+def _fill_with_detail(diffuse, bad, lum, to_albedo, blind):
+    """``diffuse`` with its ``bad`` pixels (those the highlight dominates) filled from their surroundings,
+    keeping the photo's own fine detail there.
+
+    The highlight *adds* a smooth white to the photo, so the photo's high-pass (its brightness less its
+    blur over 1/64 of the width: the lobe is smooth at that scale) is the albedo's detail in absolute
+    terms: ``lum - blur(lum)`` over ``to_albedo`` (the flash's shading times its power: photo units ->
+    albedo) is added, as a factor of the fill's brightness (within :data:`FILL_DETAIL_RANGE`), to the
+    push-pull fill. A factor of the photo's relative texture (``lum / blur(lum)``) would divide that
+    detail by the highlight's brightness over the diffuse's: 6 to 40 times too little under a highlight.
+    Where the photo has no detail (``blind``: clipped), the detail of the diffuse just beside the clipped
+    region is moved onto it (:func:`_texture_beside`), not a smooth blot."""
+    if not bad.any():
+        return diffuse
+    import cv2
+
+    w = lum.shape[1]
+    filled = fill_from_surroundings(diffuse, bad)
+    level = np.maximum(luminance(filled), 1e-6)
+    detail = (lum - blur(lum, max(1.0, w / 64.0))) / np.maximum(to_albedo, 1e-6)
+    factor = np.clip(1.0 + detail / level, 1.0 / FILL_DETAIL_RANGE, FILL_DETAIL_RANGE).astype(np.float32)
+    # no more detail than the diffuse has round the filled region (the highlight's own sensor noise, 6 to 40
+    # times the diffuse's there, is not the material's)
+    k = max(3, (w // 32) | 1)
+    around = cv2.dilate(bad.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))).astype(bool) & ~bad
+    if around.sum() > 16:
+        ld = luminance(diffuse)
+        own = ld / np.maximum(blur(ld, max(1.0, w / 64.0)), 1e-6) - 1.0
+        have, want = float(np.sqrt(np.mean((factor[bad] - 1.0) ** 2))), float(np.sqrt(np.mean(own[around] ** 2)))
+        if have > want:
+            factor = 1.0 + (factor - 1.0) * np.float32(want / have)
+    blind = blind & bad
+    if blind.any():
+        k = max(3, (w // 128) | 1)
+        blind = cv2.dilate(blind.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))).astype(bool)
+        beside = _texture_beside(np.where(blind[..., None], filled, filled * factor[..., None]), blind)
+        factor = np.where(blind, beside, factor)
+    return (filled * np.where((filled != diffuse).any(-1), factor, 1.0)[..., None]).astype(np.float32)
+
+
 def _texture_beside(diffuse, spot):
     """(H, W) relative texture (:func:`_relative_texture`) of ``diffuse`` just beside ``spot``, moved onto it."""
     cols = np.flatnonzero(spot.any(0))
@@ -489,7 +532,7 @@ def estimate(image, geo=None, with_fit=False):
     white = np.minimum(share * lum[..., None], (1.0 - SUBTRACT_FLOOR) * (lin / tint).min(-1, keepdims=True))
     base = lin - white * tint
     bad = clipped | (share[..., 0] > HIGHLIGHT_SHARE)  # what is left there is mostly the highlight's
-    flat_fill = clipped  # filled without the photo's texture: what is left there is the highlight's
+    blind = clipped  # the photo has no detail there either
     grey = None
     if fit.specular > 0:
         # where the diffuse has a colour, the highlight is read per pixel from it (glossy tiles lose
@@ -503,15 +546,12 @@ def estimate(image, geo=None, with_fit=False):
         # a pixel the highlight dominates keeps too little of its colour to read: filled from around it
         dominated = (trust > 0.5) & (luminance(by_colour) < (1.0 - HIGHLIGHT_SHARE) * lum)
         base = trust[..., None] * by_colour + (1.0 - trust[..., None]) * base
-        flat_fill = clipped | (near & (share[..., 0] > 0.05)) | dominated
-        bad = flat_fill | ((share[..., 0] > HIGHLIGHT_SHARE) & (trust < 0.5))
+        blind = clipped | (near & (share[..., 0] > 0.05))
+        bad = blind | dominated | ((share[..., 0] > HIGHLIGHT_SHARE) & (trust < 0.5))
         grey = 1.0 - coloured  # (filled pixels included: they take their surroundings' level)
+    to_albedo = geo.intensity * shading * float(keep.mean())
     diffuse = base / (geo.intensity * shading[..., None]) / keep
-    rel = None
-    if bad.any():  # the texture under the highlight: the photo's brightness over its neighbourhood's (the
-        # lobe is smooth at that scale), none where it clipped
-        rel = np.where(flat_fill, 1.0, _relative_texture(lum)).astype(np.float32)
-    diffuse = fill_from_surroundings(np.clip(diffuse, 0.0, None).astype(np.float32), bad, rel)
+    diffuse = _fill_with_detail(np.clip(diffuse, 0.0, None).astype(np.float32), bad, lum, to_albedo, blind)
     spot = _residue_spot(img, diffuse)  # what the lobe did not take off at the highlight's peak (a sharper one)
     if spot.any():
         diffuse = fill_from_surroundings(diffuse, spot, _texture_beside(diffuse, spot))

@@ -26,7 +26,9 @@ diffuse alone could copy the photo exactly, so the priors decide how the residua
   may shape it from pixel to pixel but not lower the whole map;
 * **normals near the up direction** unless the photo needs them tilted;
 * **no trend with the distance to the highlight** in the diffuse's, roughness's and F0's changes
-  (:func:`_without_radial_trend`): no disc round the flash, no vignetting taken up by the diffuse.
+  (:func:`_without_radial_trend`): no disc round the flash, no vignetting taken up by the diffuse; and
+  no tilt pointing away from (or towards) the highlight all round it (:func:`_without_radial_tilt`): no
+  bump or crater at the flash in the normals and the height integrated from them.
 
 **Schedule.** Coarse to fine (:data:`LEVELS`): the changes are first found on a small image,
 where the smooth parts converge in few cheap steps, then upsampled and refined at the next
@@ -252,10 +254,13 @@ def _tint(diffuse_log):
     return (d / np.maximum(d.mean(-1, keepdims=True), 1e-4)).astype(np.float32)
 
 
-def _spec_change(change, tint):
+def _spec_change(change, tint, level):
     """Project a change of F0 onto ``a * grey + b * tint`` with ``b >= 0`` (per pixel, least squares): F0 may
     rise or fall, and take on the diffuse's own colour (a metal's look), but no other colour: not the
-    blue that would whiten a highlight over brown wood, nor the photo's texture."""
+    blue that would whiten a highlight over brown wood, nor the photo's texture. The colour only where
+    F0's ``level`` (the start's plus this change's, luminance) is a metal's: a dielectric's change is
+    grey (:func:`svbrdf_cli.conventions.metal_weight`; a dielectric's highlight is the flash's white,
+    and a wood's F0 tinted by its diffuse renders pink highlights and reads as metal)."""
     one = np.ones_like(tint)
     g11, g12, g22 = 3.0, tint.sum(-1, keepdims=True), (tint * tint).sum(-1, keepdims=True)
     r1, r2 = change.sum(-1, keepdims=True), (change * tint).sum(-1, keepdims=True)
@@ -264,7 +269,9 @@ def _spec_change(change, tint):
     b = np.where(ok, (g11 * r2 - g12 * r1) / np.where(ok, det, 1.0), 0.0)
     b = np.maximum(b, 0.0)
     a = (r1 - b * g12) / g11
-    return (a * one + b * tint).astype(np.float32)
+    metal = cv.metal_weight(level)[..., None].astype(np.float32)
+    grey = r1 / g11
+    return (metal * (a * one + b * tint) + (1.0 - metal) * grey * one).astype(np.float32)
 
 
 def _radial(side, centre, rings=RADIAL_RINGS):
@@ -289,6 +296,22 @@ def _without_radial_trend(change, radial):
         t = np.interp(rho, centres[ok], trend).astype(np.float32)
         out[..., c] = v - (t - float(t.mean()))  # (interpolated, the trend's own mean is not quite 0)
     return out
+
+
+def _without_radial_tilt(tilt, radial, centre):
+    """``tilt`` (H, W, 2) less its ring means' component along the direction away from ``centre`` (the
+    highlight's), interpolated between ring centres: a tilt that points away from (or towards) the flash
+    all round it is a bump (or a crater) under the highlight, which integrates into the height map; a
+    relief's tilts point every way round any point."""
+    rho, centres, ring, count = radial
+    side = tilt.shape[0]
+    p = cv.surface_positions(side, side)
+    away = np.stack([p[..., 0] - centre[0], p[..., 1] - centre[1]], -1) / np.maximum(rho, 1e-6)[..., None]
+    along = (tilt * away).sum(-1)
+    ok = count > 0
+    means = np.bincount(ring, weights=along.ravel().astype(np.float64), minlength=len(centres))
+    t = np.interp(rho, centres[ok], means[ok] / count[ok]).astype(np.float32)
+    return (tilt - t[..., None] * away).astype(np.float32)
 
 
 def parameters(stored):
@@ -329,7 +352,7 @@ def fit_intensity(photo_lin, params, geometry, weight=None):
     return num / den if den > 0 else cv.FLASH_INTENSITY
 
 
-def _fill_unobserved(start, p, unobserved, radial):
+def _fill_unobserved(start, p, unobserved, radial, centre):
     """``p`` with its change from ``start`` (:data:`FILLED`: tilt, diffuse, roughness, F0) at the ``unobserved`` pixels (the
     photo clipped them) taken from their surroundings' change (:func:`svbrdf_cli.imageops.fill_from_surroundings`),
     those of :data:`RADIAL_FREE` then freed of any radial trend again (``radial``: :func:`_radial`). The photo
@@ -341,6 +364,8 @@ def _fill_unobserved(start, p, unobserved, radial):
         change = imageops.fill_from_surroundings(p[k] - start[k], unobserved)
         if k in RADIAL_FREE:
             change = _without_radial_trend(change, radial)
+        elif k == "tilt":
+            change = _without_radial_tilt(change, radial, centre)
         out[k] = (start[k] + change).astype(np.float32)
     _project(out)
     return out
@@ -399,9 +424,11 @@ def refine(image, stored, geometry, iterations=DEFAULT_ITERATIONS, priors=None, 
                 m2[k] = 0.999 * m2[k] + 0.001 * g[k] * g[k]
                 step = STEP[k] * (m1[k] / (1 - 0.9 ** i)) / (np.sqrt(m2[k] / (1 - 0.999 ** i)) + 1e-12)
                 delta[k] = (delta[k] - step).astype(np.float32)
-            delta["specular"] = _spec_change(delta["specular"], tint)
+            delta["specular"] = _spec_change(delta["specular"], tint,
+                                             luminance(init["specular"] + delta["specular"]))
             for k in RADIAL_FREE:
                 delta[k] = _without_radial_trend(delta[k], radial)
+            delta["tilt"] = _without_radial_tilt(delta["tilt"], radial, geometry.highlight[:2])
             done += 1
             if progress:
                 progress(done)
@@ -415,7 +442,8 @@ def refine(image, stored, geometry, iterations=DEFAULT_ITERATIONS, priors=None, 
         total, data, _ = full(p)
         if np.isfinite(total) and (best_total is None or total < best_total):
             best, best_data = p, data
-    best = _fill_unobserved(start, best, full.weight[..., 0] <= 0, radial)  # (the last level's: full size)
+    # (radial: the last level's, at full size)
+    best = _fill_unobserved(start, best, full.weight[..., 0] <= 0, radial, geometry.highlight[:2])
     out = _stored(best)
     ok = all(np.isfinite(v).all() for v in out.values()) and best_data <= loss_before
     if not ok:

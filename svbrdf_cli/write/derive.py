@@ -15,11 +15,11 @@ from svbrdf_cli import conventions as cv
 #: KHR_materials_pbrSpecularGlossiness conversion sample.
 _BRIGHTNESS_WEIGHTS = (0.299, 0.587, 0.114)
 
-#: Specular brightness within this of the dielectric F0 counts as dielectric.
-#: It is about half a step of an 8-bit gamma-2.2 file near 0.04, so a stored
-#: 0.04 that rounds slightly up cannot pick the quadratic's second, metallic
-#: root for dark dielectrics (see :func:`specular_to_metallic`).
-DIELECTRIC_TOLERANCE = 1e-3
+#: Specular brightness up to this is a dielectric's, whatever its tint (and a dielectric whose F0
+#: took on some of its diffuse's colour); the metallic solution is faded in up to METAL_MIN
+#: (:func:`svbrdf_cli.conventions.metal_weight`).
+DIELECTRIC_MAX = cv.DIELECTRIC_MAX_F0
+METAL_MIN = cv.METAL_MIN_F0
 
 #: Smallest |n_z| used when turning normals into slopes (slope <= 20).
 _MIN_NZ = 0.05
@@ -34,7 +34,7 @@ def _brightness(c):
     return np.sqrt((c * c * w).sum(-1, keepdims=True))
 
 
-def specular_to_metallic(diffuse, specular, tolerance=DIELECTRIC_TOLERANCE):
+def specular_to_metallic(diffuse, specular):
     """Specular/diffuse albedos -> metallic-roughness base colour and metallic.
 
     KHR_materials_pbrSpecularGlossiness' ``solveMetallic``, written from its
@@ -60,16 +60,19 @@ def specular_to_metallic(diffuse, specular, tolerance=DIELECTRIC_TOLERANCE):
     dielectrics) and ``(specular - F0 (1 - m)) / m`` (exact for metals) with
     weight m^2, as the sample does.
 
-    Pure dielectrics (specular = F0) and pure metals (diffuse = 0) round-trip
-    exactly through ``diffuse = base (1 - m), specular = lerp(F0, base, m)``.
-    Dark materials are ambiguous (a dark dielectric and a dark grey metal
-    reflect alike); at S = F0 the quadratic's roots are 0 and a spurious
-    metallic one, hence ``tolerance``.
+    Dark materials are ambiguous: a dark dielectric and a dark grey metal
+    reflect alike, and just above S = F0 the quadratic's larger root over a
+    dark diffuse is large (diffuse 0.02 with F0 0.045 solves to m = 0.58).
+    So a specular in the dielectric range (brightness up to
+    :data:`DIELECTRIC_MAX`, any tint) is a dielectric, m = 0, and the root is
+    faded in up to :data:`METAL_MIN` (a smoothstep of the brightness).
+    Pure dielectrics (specular = F0) and metals brighter than
+    :data:`METAL_MIN` (diffuse = 0) round-trip exactly through
+    ``diffuse = base (1 - m), specular = lerp(F0, base, m)``.
 
     Args:
         diffuse: (..., 3) linear diffuse albedo in [0, 1].
         specular: (..., 3) linear specular albedo (F0) in [0, 1].
-        tolerance: specular brightness up to ``F0 + tolerance`` is dielectric.
 
     Returns:
         (base_colour (..., 3) linear RGB in [0, 1], metallic (..., 1) in
@@ -84,7 +87,7 @@ def specular_to_metallic(diffuse, specular, tolerance=DIELECTRIC_TOLERANCE):
     c = f0 - bs
     disc = np.maximum(b * b - 4.0 * f0 * c, 0.0)
     m = ((np.sqrt(disc) - b) / (2.0 * f0)).clip(0.0, 1.0)
-    m = np.where(bs < f0 + tolerance, 0.0, m)
+    m = m * cv.metal_weight(bs)
     eps = 1e-6
     from_diffuse = d * (keep / (1.0 - f0) / np.maximum(1.0 - m, eps))
     from_specular = (s - f0 * (1.0 - m)) / np.maximum(m, eps)
@@ -188,20 +191,28 @@ def ambient_occlusion(height, pixel, tileable=False):
     return np.clip(ao, 0.0, 1.0).astype(np.float32)
 
 
-def height_to_unit(height):
-    """Heights -> ([0, 1] map, depth): ``height = map * depth + offset``.
+#: The height map's fixed scale: its [0, 1] range spans this many texture widths, 0.5 being the mean
+#: surface (height in widths = (value - 0.5) * HEIGHT_SPAN). Fixed, not stretched to each map's own
+#: range: a nearly flat material stays a nearly flat grey, and every set reads the same way.
+HEIGHT_SPAN = 0.1
+#: The height map's value for the mean surface (Blender's Displacement node's default midlevel).
+HEIGHT_MIDLEVEL = 0.5
+
+
+def height_to_map(height, width_units):
+    """Heights -> the height map's values at the fixed scale (:data:`HEIGHT_SPAN`, :data:`HEIGHT_MIDLEVEL`).
 
     Args:
-        height: (H, W) heights in surface units.
+        height: (H, W) heights in surface units (:func:`normals_to_height`).
+        width_units: the map's width in the same units.
 
     Returns:
-        ((H, W) float32 in [0, 1], depth in surface units per full [0, 1]
-        swing). A flat field gives 0.5 everywhere and depth 0.
+        (H, W) float32 in [0, 1]: ``HEIGHT_MIDLEVEL + (height - mean) / width_units / HEIGHT_SPAN``, clipped.
+        A flat field gives HEIGHT_MIDLEVEL everywhere.
     """
-    lo, hi = float(height.min()), float(height.max())
-    if hi - lo < 1e-12:
-        return np.full(height.shape, 0.5, np.float32), 0.0
-    return ((height - lo) / (hi - lo)).astype(np.float32), hi - lo
+    h = np.asarray(height, np.float64)
+    widths = (h - h.mean()) / float(width_units)
+    return np.clip(HEIGHT_MIDLEVEL + widths / HEIGHT_SPAN, 0.0, 1.0).astype(np.float32)
 
 
 def normals_to_opengl(normals):

@@ -29,7 +29,8 @@ blender        <name>_BaseColor.png (sRGB); <name>_Roughness.png,
 
 Every preset but ``svbrdf`` also writes ``texture_set.json``: the preset, the
 normal-map convention, each file's role and colour space, and the height map's
-depth scale (a PNG cannot say how deep its [0, 1] range is).
+scale (a PNG cannot say how deep its [0, 1] range is): a fixed one, 0.5 the mean
+surface and the range :data:`svbrdf_cli.write.derive.HEIGHT_SPAN` texture widths.
 
 Blender names follow Node Wrangler's "Principled Texture Setup" (Ctrl+Shift+T),
 which splits a file name at ``_ - . #``, at lower-to-upper case changes and
@@ -67,8 +68,10 @@ from svbrdf_cli.write.atomic import write_set
 from svbrdf_cli.errors import MapSetError
 from svbrdf_cli.write.derive import (
     AO_NOTE,
+    HEIGHT_MIDLEVEL,
+    HEIGHT_SPAN,
     ambient_occlusion,
-    height_to_unit,
+    height_to_map,
     normals_to_directx,
     normals_to_height,
     normals_to_opengl,
@@ -138,13 +141,15 @@ class _Files:
         return ambient_occlusion(self.height_field(normals), 2.0 * cv.SURFACE_HALF_SIZE / w, self.tileable)[..., None]
 
     def height(self, stem, normals):
-        unit, depth = height_to_unit(self.height_field(normals))
+        height = self.height_field(normals)
+        unit = height_to_map(height, 2.0 * cv.SURFACE_HALF_SIZE)
         self.data(stem, unit[..., None], "height", bits=HEIGHT_BITS)
+        relief = float(height.max() - height.min()) / (2.0 * cv.SURFACE_HALF_SIZE)
         self.meta["height"] = {
-            "file": self.names[-1], "depth": depth,
-            "depth_to_width": depth / (2.0 * cv.SURFACE_HALF_SIZE),
-            "note": "height = value * depth (surface units; the image is 2 units wide): "
-                    "displacement scale = depth_to_width * the texture's real-world width",
+            "file": self.names[-1], "scale_to_width": HEIGHT_SPAN, "midlevel": HEIGHT_MIDLEVEL,
+            "relief_to_width": round(relief, 6),
+            "note": f"height in texture widths = (value - {HEIGHT_MIDLEVEL}) * {HEIGHT_SPAN}: a displacement "
+                    f"node's midlevel {HEIGHT_MIDLEVEL}, scale {HEIGHT_SPAN} * the texture's real-world width",
             "integration": "Frankot-Chellappa from the normal map"}
 
     def _write(self, name, pixels, bits, role, space):

@@ -54,3 +54,35 @@ def test_name_names_the_engine_files(tmp_path):
     code, output = run("export", tmp_path / "maps", "-o", tmp_path / "u", "--preset", "unity-hdrp", "--name", "Oak")
     assert code == 0, output
     assert {"Oak_BaseMap.png", "Oak_MaskMap.png", "Oak_Normal.png", "Oak_Height.png"} <= set(os.listdir(tmp_path / "u"))
+
+
+def _relief(n=64):
+    """A known relief (surface units; the surface is 2 units wide) and its normals."""
+    p = cv.surface_positions(n, n)
+    x, y = p[..., 0], p[..., 1]
+    g = np.exp(-((x - 0.2) ** 2 + (y + 0.1) ** 2) / 0.08)
+    h = 0.04 * g + 0.01 * np.sin(3 * np.pi * x)
+    dx = 0.04 * g * (-2 * (x - 0.2) / 0.08) + 0.03 * np.pi * np.cos(3 * np.pi * x)
+    dy = 0.04 * g * (-2 * (y + 0.1) / 0.08)
+    return h, cv.normalize(np.stack([-dx, -dy, np.ones_like(h)], -1)).astype(np.float32)
+
+
+def test_height_is_the_relief_at_a_fixed_scale_and_flat_normals_are_flat(tmp_path):
+    from svbrdf_cli.write.derive import HEIGHT_SPAN
+    import json
+
+    flat = dict(_maps(64, 64), normal=np.tile(np.float32([0, 0, 1]), (64, 64, 1)))
+    h, normals = _relief()
+    for name, maps in (("flat", flat), ("relief", dict(flat, normal=normals))):
+        mapset.write_map_set(tmp_path / name, maps, bits=16)
+        code, output = run("export", tmp_path / name, "-o", tmp_path / f"{name}_gltf", "--preset", "gltf")
+        assert code == 0, output
+    # mid-grey; the 16-bit normal file's rounding (0.5 is not a 16-bit value) is not stretched to 0-1
+    flat_height = read_image(tmp_path / "flat_gltf" / "height.png")
+    assert np.abs(flat_height - 0.5).max() < 1e-3
+    meta = json.loads((tmp_path / "relief_gltf" / "material.gltf").read_text())["materials"][0]["extras"]["height"]
+    assert meta["scale_to_width"] == HEIGHT_SPAN and meta["midlevel"] == 0.5
+    got = (read_image(tmp_path / "relief_gltf" / "height.png")[..., 0] - 0.5) * HEIGHT_SPAN  # texture widths
+    want = (h - h.mean()) / 2.0
+    assert np.corrcoef(got.ravel(), want.ravel())[0, 1] > 0.98
+    assert abs(np.ptp(got) / np.ptp(want) - 1) < 0.1

@@ -192,15 +192,25 @@ def test_transfer_carries_the_change_to_another_size():
 
 def test_specular_changes_only_grey_or_in_the_diffuse_colour():
     brown = np.array([[[1.5, 1.0, 0.5]]], np.float32)  # a diffuse's tint (unit channel mean)
+    metal = np.array([[0.5]], np.float32)              # F0 at a metal's level: its colour may follow the diffuse
     gold = np.array([[[0.3, 0.2, 0.1]]], np.float32)   # a change along that tint: kept
-    assert np.allclose(refine._spec_change(gold, brown), gold, atol=1e-6)
+    assert np.allclose(refine._spec_change(gold, brown, metal), gold, atol=1e-6)
     grey = np.full((1, 1, 3), 0.05, np.float32)        # a grey change: kept
-    assert np.allclose(refine._spec_change(grey, brown), grey, atol=1e-6)
+    assert np.allclose(refine._spec_change(grey, brown, metal), grey, atol=1e-6)
     blue = np.array([[[-0.1, 0.0, 0.1]]], np.float32)   # against the tint: no blue F0 on brown wood
-    out = refine._spec_change(blue, brown)
+    out = refine._spec_change(blue, brown, metal)
     assert np.ptp(out) < 1e-6 and abs(float(out.mean())) < 1e-6
-    flat = refine._spec_change(blue, np.ones((1, 1, 3), np.float32))  # grey diffuse: grey changes only
+    flat = refine._spec_change(blue, np.ones((1, 1, 3), np.float32), metal)  # grey diffuse: grey changes only
     assert np.ptp(flat) < 1e-6
+
+
+def test_a_dielectrics_specular_change_is_grey():
+    # at a dielectric's F0 level a change along the diffuse's colour keeps its size but loses its colour:
+    # a wood's F0 does not turn orange (pink highlights, and metal once converted)
+    brown = np.array([[[1.5, 1.0, 0.5]]], np.float32)
+    gold = np.array([[[0.03, 0.02, 0.01]]], np.float32)
+    out = refine._spec_change(gold, brown, np.array([[0.06]], np.float32))
+    assert np.ptp(out) < 1e-7 and abs(float(out.mean()) - 0.02) < 1e-7
 
 
 def test_the_specular_maps_mean_never_falls_under_a_dielectrics_f0(monkeypatch):
@@ -392,5 +402,5 @@ def test_the_fill_gives_the_clipped_region_its_surroundings_tilt_too():
     unobserved = np.zeros((side, side), bool)
     unobserved[24:40, 24:40] = True
     p["tilt"][unobserved] = 0.0  # ...but not what the photo clipped
-    out = refine._fill_unobserved(start, p, unobserved, refine._radial(side, (0.0, 0.0)))
+    out = refine._fill_unobserved(start, p, unobserved, refine._radial(side, (0.0, 0.0)), (0.0, 0.0))
     assert np.allclose(out["tilt"][unobserved, 0], 0.1, atol=1e-3)  # no outline of the clipped region left

@@ -23,12 +23,22 @@ def test_sample_maps_unchanged_within_one_level(tmp_path, preview):
     code, out = run("capture", SAMPLE, "-o", tmp_path, "--model", "fast", "--refine", "0", "--size", "512", "-q",
                     *([] if preview else ["--no-preview"]))
     assert code == 0, out
+    # the golden maps predate the albedo level of docs/conventions.md ("The albedo level"): the diffuse is
+    # compared at the level the model wrote it, the recorded scale undone (one more rounding: 1.5 levels)
+    import json
+
+    scale = json.loads((tmp_path / "glazed_tiles" / "material.json").read_text())["albedo_level"]["scale"]
     for name in cv.MAP_NAMES:
         got, want = read_image(tmp_path / "glazed_tiles" / f"{name}.png"), read_image(os.path.join(GOLDEN, f"{name}.png"))
+        slack = 0.0
+        if name == "diffuse":
+            got = cv.albedo_to_stored(cv.albedo_to_linear(got) / scale)
+            ok = cv.albedo_to_linear(want) * scale < 1.0  # (what the level clipped is lost)
+            got, want, slack = got[ok], want[ok], 0.5
         assert got.shape == want.shape, name
         diff = np.abs(got - want) * 255
-        assert diff.max() <= 1.0 + 1e-4, (name, diff.max())
-        assert (diff > 0.5).mean() < 0.001, (name, (diff > 0.5).mean())  # a few rounding flips at most
+        assert diff.max() <= 1.0 + slack + 1e-4, (name, diff.max())
+        assert (diff > 0.5 + slack).mean() < 0.001, (name, (diff > 0.5).mean())  # a few rounding flips at most
 
 
 @pytest.mark.parametrize("isal", [True, False])

@@ -60,7 +60,8 @@ def right(img):
 
 @pytest.mark.parametrize("m", [0.0, 1.0])
 def test_solve_metallic_round_trips_pure_materials(m):
-    colour = np.random.default_rng(1).uniform(0.05, 1.0, (200, 3))
+    # (a metal's colour brighter than METAL_MIN: dimmer "metals" are read as dielectrics, below)
+    colour = np.random.default_rng(1).uniform(0.2, 1.0, (200, 3))
     diffuse, specular = metalness_forward(colour, m)
     base, metallic = derive.specular_to_metallic(diffuse, specular)
     assert metallic.shape == (200, 1)
@@ -73,6 +74,9 @@ def test_solve_metallic_inverts_its_forward_model_for_grey():
     base = np.linspace(0.1, 1.0, 10)[:, None].repeat(3, 1)
     m = np.linspace(0.05, 0.95, 10)[:, None]
     specular = F0 + (base - F0) * m
+    clear = specular[:, 0] >= derive.METAL_MIN  # (below it the metallic root is faded out: see the next tests)
+    base, m, specular = base[clear], m[clear], specular[clear]
+    assert len(m) >= 6
     diffuse = base * (1 - F0) * (1 - m) / (1 - specular.max(-1, keepdims=True))
     b, got = derive.specular_to_metallic(diffuse, specular)
     np.testing.assert_allclose(got, m, atol=1e-5)
@@ -82,9 +86,36 @@ def test_solve_metallic_inverts_its_forward_model_for_grey():
 def test_dark_dielectric_stays_dielectric_after_quantisation():
     # 0.04 stored in 8-bit gamma 2.2 and rounded up: the quadratic's other root would say "metal".
     spec = np.full((1, 3), (round(F0 ** (1 / cv.ALBEDO_GAMMA) * 255) + 0.4) / 255) ** cv.ALBEDO_GAMMA
-    assert F0 < spec[0, 0] < F0 + derive.DIELECTRIC_TOLERANCE
+    assert F0 < spec[0, 0] < F0 + 1e-3
     base, m = derive.specular_to_metallic(np.full((1, 3), 0.01), spec)
     assert m[0, 0] == 0.0 and abs(base[0, 0] - 0.01) < 1e-3
+
+
+@pytest.mark.parametrize("diffuse", [(0.02, 0.02, 0.02), (0.30, 0.12, 0.04), (0.25, 0.02, 0.03)])
+def test_dielectric_specular_tinted_by_its_diffuse_is_not_metal(diffuse):
+    # black plastic, walnut, red lacquer: F0 raised and tinted towards the diffuse's colour, still in a
+    # dielectric's range. The quadratic alone gives black plastic with F0 0.045 a metallic of 0.58.
+    d = np.asarray(diffuse, np.float64)
+    tint = d / d.mean()
+    luma = np.array([0.299, 0.587, 0.114])  # the conversion's perceived brightness
+    spec = []
+    for level in np.linspace(F0, 0.075, 8):
+        for a in np.linspace(0.0, 1.0, 5):  # grey .. fully the diffuse's colour
+            c = 1.0 + a * (tint - 1.0)
+            spec.append(c * level / np.sqrt((luma * c * c).sum()))
+    spec = np.array(spec)
+    base, m = derive.specular_to_metallic(np.broadcast_to(d, spec.shape), spec)
+    assert m.max() == 0.0
+    np.testing.assert_allclose(base, d * (1 - spec.max(-1, keepdims=True)) / (1 - F0), atol=1e-6)
+
+
+def test_metallic_fades_in_without_a_step():
+    # a grey metal brightening from a dielectric's F0 to a metal's: metallic rises smoothly, never jumps
+    s = np.linspace(F0, 0.6, 400)[:, None].repeat(3, 1)
+    _, m = derive.specular_to_metallic(np.zeros_like(s), s)
+    m = m[:, 0]
+    assert m[s[:, 0] <= derive.DIELECTRIC_MAX].max() == 0.0 and m[s[:, 0] >= derive.METAL_MIN].min() > 0.99
+    assert np.all(np.diff(m) >= -1e-6) and np.abs(np.diff(m)).max() < 0.05  # (a step would be 1)
 
 
 # --------------------------------------------------------------------------
@@ -138,9 +169,9 @@ def test_height_of_a_non_tileable_ramp_and_bump():
     assert got[0].mean() > got[-1].mean()
 
 
-def test_flat_normals_give_mid_grey_and_zero_depth():
-    unit, depth = derive.height_to_unit(derive.normals_to_height(np.tile([0.0, 0.0, 1.0], (8, 8, 1))))
-    assert depth == 0.0 and np.all(unit == 0.5)
+def test_flat_normals_give_mid_grey():
+    unit = derive.height_to_map(derive.normals_to_height(np.tile([0.0, 0.0, 1.0], (8, 8, 1))), 2.0)
+    assert np.all(unit == derive.HEIGHT_MIDLEVEL)
 
 
 # --------------------------------------------------------------------------
@@ -265,7 +296,7 @@ def test_exr_for_linear_data(maps, tmp_path):
         presets.write_gltf(tmp_path / "g", maps, fmt="exr")
 
 
-def test_texture_set_json_records_height_depth(tmp_path):
+def test_texture_set_json_records_the_height_scale(tmp_path):
     h = periodic_height(32)
     maps = {"normal": analytic_normals(32).astype(np.float32), "diffuse": np.full((32, 32, 3), 0.5, np.float32),
             "roughness": np.full((32, 32, 1), 0.5, np.float32), "specular": np.full((32, 32, 3), F0, np.float32)}
@@ -273,7 +304,11 @@ def test_texture_set_json_records_height_depth(tmp_path):
     meta = json.loads((tmp_path / "ue" / "texture_set.json").read_text())
     assert meta["preset"] == "unreal" and meta["normal_map"].startswith("DirectX")
     assert meta["height"]["file"] == "T_ue_H.png" and meta["files"]["T_ue_H.png"]["bits"] == 16
-    assert abs(meta["height"]["depth"] / np.ptp(h) - 1) < 0.1
+    assert meta["height"]["scale_to_width"] == derive.HEIGHT_SPAN and meta["height"]["midlevel"] == 0.5
+    # the relief, in texture widths (the surface is 2 units wide), read back from the file at that scale
+    got = (read_image(tmp_path / "ue" / "T_ue_H.png")[..., 0] - 0.5) * derive.HEIGHT_SPAN
+    assert abs(np.ptp(got) / (np.ptp(h) / 2.0) - 1) < 0.1
+    assert abs(meta["height"]["relief_to_width"] / (np.ptp(h) / 2.0) - 1) < 0.1
     assert meta["files"]["T_ue_BC.png"]["colour_space"] == "sRGB"
     assert meta["files"]["T_ue_ORM.png"]["colour_space"] == "linear"
 

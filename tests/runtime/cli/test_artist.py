@@ -1,0 +1,80 @@
+"""What an artist gets from ``svbrdf capture``: a plausible albedo level, no flash hole in the diffuse, no
+metal on a dielectric, a flat height where the normals are flat (issue "What an artist gets from a real
+photo")."""
+
+import json
+
+import numpy as np
+
+from svbrdf_cli import conventions as cv
+from svbrdf_cli.imageio import read_image, write_image
+from svbrdf_cli.imageops import blur, luminance
+
+from .clitools import ROOT, SAMPLE, run
+
+
+def _linear_diffuse(folder):
+    return cv.albedo_to_linear(read_image(folder / "diffuse.png"))
+
+
+def test_the_sample_albedo_is_at_the_photos_own_level(tmp_path):
+    # the bundled sample's true diffuse averages 0.285 (linear); the capture used to give 0.052
+    truth = cv.albedo_to_linear(read_image(f"{ROOT}/examples/glazed_tiles/diffuse.png"))
+    code, out = run("capture", SAMPLE, "-o", tmp_path / "auto", "--size", 256, "--no-preview")
+    assert code == 0, out
+    got = _linear_diffuse(tmp_path / "auto" / "glazed_tiles")
+    assert 0.7 < got.mean() / truth.mean() < 1.3
+    # per channel too: the level, not a tint
+    np.testing.assert_allclose(got.mean((0, 1)) / truth.mean((0, 1)), got.mean() / truth.mean(), rtol=0.2)
+    rec = json.loads((tmp_path / "auto" / "glazed_tiles" / "material.json").read_text())
+    assert rec["albedo_level"]["scale"] > 0 and "de-lit" in rec["albedo_level"]["convention"]
+    # the photo's level, not the tool's exposure: the photo as shot (--exposure 0) gives the same albedo, and
+    # one stop more doubles it
+    for stops in ("0", "1"):
+        code, out = run("capture", SAMPLE, "-o", tmp_path / stops, "--size", 256, "--no-preview", "--exposure", stops)
+        assert code == 0, out
+    zero, one = (_linear_diffuse(tmp_path / s / "glazed_tiles") for s in ("0", "1"))
+    assert abs(zero.mean() / got.mean() - 1) < 0.1  # (the fits see other clipping at another exposure)
+    ok = one < 0.9  # (not clipped)
+    assert abs(np.median(one[ok] / np.maximum(zero[ok], 1e-4)) - 2.0) < 0.15
+
+
+def _walnut_photo(path, side=384, seed=3):
+    """A flash photo of a brown, finely grained, glossy dielectric: the highlight clips in the middle."""
+    from svbrdf_cli.shading import render_maps
+
+    rng = np.random.default_rng(seed)
+    grain = blur(rng.normal(0.0, 1.0, (side, side)).astype(np.float32), 1.0)
+    grain = grain / grain.std()
+    albedo = np.array([0.30, 0.13, 0.05], np.float32) * (1.0 + 0.25 * grain)[..., None]
+    maps = {"normal": np.tile(np.float32([0, 0, 1]), (side, side, 1)), "diffuse": albedo.astype(np.float32),
+            "roughness": np.full((side, side, 1), 0.25, np.float32), "specular": np.full((side, side, 3), 0.04, np.float32)}
+    lin = render_maps(maps, light=cv.FLASH_POSITION, intensity=cv.LIGHT_INTENSITY * 1.6)
+    write_image(path, cv.linear_to_srgb(np.clip(lin, 0.0, 1.0)).astype(np.float32))
+    return path, grain
+
+
+def test_no_flash_hole_and_no_false_metal(tmp_path):
+    photo, _ = _walnut_photo(tmp_path / "walnut.png")
+    code, out = run("capture", photo, "-o", tmp_path / "o", "--preset", "gltf", "--no-preview")
+    assert code == 0, out
+    folder = tmp_path / "o" / "walnut"
+    base = read_image(folder / "baseColor.png")
+    lum = luminance(base)
+    side = lum.shape[0]
+    yy, xx = np.mgrid[:side, :side]
+    r = np.hypot(yy - side / 2, xx - side / 2)
+    spot, ring = r < 0.08 * side, (r > 0.12 * side) & (r < 0.2 * side)
+    hp = lum - blur(lum, side / 256.0)
+    fine = np.sqrt(np.mean(hp[spot] ** 2)) / np.sqrt(np.mean(hp[ring] ** 2))
+    lin = luminance(cv.srgb_to_linear(base))
+    bright = lin[spot].mean() / lin[ring].mean()
+    assert fine >= 0.5, fine  # the grain goes on under the highlight (it was a smooth disc)
+    assert 0.8 <= bright <= 1.25, bright
+    metallic = read_image(folder / "metallicRoughness.png")[..., 2]
+    assert metallic.max() == 0.0  # a dielectric: no metal anywhere, its F0 tinted or not
+    # its specular stays grey: no orange F0 to render pink highlights
+    code, out = run("capture", photo, "-o", tmp_path / "n", "--no-preview")
+    assert code == 0, out
+    spec = cv.albedo_to_linear(read_image(tmp_path / "n" / "walnut" / "specular.png"))
+    assert np.abs(spec - spec.mean(-1, keepdims=True)).max() < 0.005
