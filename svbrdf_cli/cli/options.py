@@ -104,8 +104,9 @@ _CAPTURE_OPTIONS = [
                       "photo agree (white) or not (dark). Runs the networks 5 times."),
     click.option("--no-preview", is_flag=True, help="Skip preview.png."),
     click.option("--no-ao", is_flag=True, help="Constant ambient occlusion (1) instead of one from the height."),
-    click.option("--tileable", is_flag=True, help="Seamless maps: every map cross-faded with its half-shifted "
-                                                  "copy near the borders, so the set tiles without a seam."),
+    click.option("--tileable", is_flag=True, help="Seamless maps: every map cross-faded, one axis at a time, with a "
+                                                  "copy of itself shifted in step with its pattern (a regular pattern "
+                                                  "first cut to whole repeats), so a tiling shows no seam."),
     click.option("--refine", type=click.IntRange(0, MAX_ITERATIONS), default=DEFAULT_ITERATIONS, show_default=True,
                  is_flag=False, flag_value=DEFAULT_ITERATIONS, metavar="[N]",
                  help="Steps fitting the maps to the photo under its own flash (about 2.5 s; 0: off, the "

@@ -209,11 +209,13 @@ def infer_set(prepared, chain, out_root, opts, model_name="fast", progress=None)
             raise SvbrdfError(f"The model produced non-finite values for '{p.path}' ({k}); please report this photo.")
     plausible.check_maps(p.path, net_in, stored, chain.describe().get("found"))
     maps = None  # linear maps, made only where needed (the native preset writes the stored ones)
+    tiling = None
     if opts.tileable:
         from svbrdf_cli.write.mapset import linear_to_stored
         from svbrdf_cli.write.tiling import make_tileable
 
-        maps = make_tileable(stored_to_linear(stored))
+        tiling = {}
+        maps = make_tileable(stored_to_linear(stored), report=tiling)
         stored = linear_to_stored(maps)
     t2 = time.perf_counter()
     timings["upsample"] = t2 - t_up
@@ -238,6 +240,8 @@ def infer_set(prepared, chain, out_root, opts, model_name="fast", progress=None)
         "upsampling": upsampling,
         "preset": opts.preset, "bits": opts.bits, "format": opts.fmt, "tileable": opts.tileable,
     }
+    if tiling is not None:
+        record["tiling"] = tiling
     if refined is not None:
         record.update(refined)
     if conf is not None:
