@@ -8,7 +8,7 @@ import pytest
 
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.imageio import read_image
-from svbrdf_cli.infer.chain import installed_tiers
+from svbrdf_cli.infer.chain import TIERS, installed_tiers
 from svbrdf_cli.infer.registry import DEFAULT_MODEL
 
 from .clitools import SAMPLE, make_photo, run
@@ -80,8 +80,21 @@ def test_usage_errors_exit_2(tmp_path):
     assert run("capture", SAMPLE, "-o", tmp_path, "--size", 100)[0] == 2       # size out of range
     assert run("capture", SAMPLE, "-o", tmp_path, "--corners", "1,2,3")[0] == 2
     assert run("capture", SAMPLE, "-o", tmp_path, "--preset", "svbrdf", "--format", "exr")[0] == 2
-    code, out = run("capture", SAMPLE, "-o", tmp_path, "--model", "best")
-    assert code == 1 and "not installed" in out
+
+
+@pytest.mark.parametrize("command", ["capture", "batch"])
+def test_model_help_lists_installed_models_and_others_are_usage_errors(tmp_path, command):
+    code, out = run(command, "--help")
+    assert code == 0
+    help_text = " ".join(out.split())
+    for tier in TIERS:
+        assert (tier in help_text) == (tier in installed_tiers()), tier
+    src = SAMPLE if command == "capture" else os.path.dirname(SAMPLE)
+    for name in [t for t in TIERS if t not in installed_tiers()] + ["nope", str(tmp_path / "no_such_folder")]:
+        code, out = run(command, src, "-o", tmp_path / "o", "--model", name)
+        assert code == 2, (name, out)
+        assert f"default ({DEFAULT_MODEL})" in out and "lite" not in out.split("default")[-1], out
+    assert not (tmp_path / "o").exists()
 
 
 def test_missing_file_is_one_failure_not_a_crash(tmp_path):
