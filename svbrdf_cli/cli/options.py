@@ -12,9 +12,8 @@ import click
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.run.batch import Job
 from svbrdf_cli.errors import OutputExistsError
-from svbrdf_cli.infer.chain import ModelError, installed_tiers
-from svbrdf_cli.infer.registry import AUTO, DEFAULT_MODEL, check_model
-from svbrdf_cli.cli.values import corners, exposure, light, numbers
+from svbrdf_cli.infer.registry import DEFAULT_MODEL
+from svbrdf_cli.cli.values import corners, exposure, light, model_help, model_value, numbers
 from svbrdf_cli.run.pipeline import MAX_SIZE, MIN_SIZE, Options
 from svbrdf_cli.infer.upsample import UPSAMPLE_METHODS
 from svbrdf_cli.write.presets import FORMATS, PNG_BITS, PNG_ONLY_PRESETS, PRESETS
@@ -75,23 +74,11 @@ def check_format(preset, fmt):
         raise click.UsageError(f"The {preset} preset writes PNG only; drop --format {fmt}.")
 
 
-def model_value(ctx, param, value):
-    """``--model``: a name that is not installed, or a folder that does not exist, is a usage error."""
-    try:
-        check_model(value)
-    except ModelError as e:
-        raise click.BadParameter(str(e)) from None
-    return value
-
-
 _CAPTURE_OPTIONS = [
     click.option("-o", "--output", required=True, type=click.Path(file_okay=False),
                  help="Folder for the texture sets: one sub-folder per photo, named after it."),
     click.option("--model", default=DEFAULT_MODEL, show_default=True, callback=model_value,
-                 help="'physical' (the maps computed from the flash physics: today's most accurate)"
-                      + (f", an installed network ({', '.join(installed_tiers())})" if installed_tiers() else "")
-                      + f", '{AUTO}' (per photo, the cheapest of physical and the installed networks that is good "
-                        "enough for it) or a folder of exported models."),
+                 help=model_help()),
     click.option("--preset", type=click.Choice(list(PRESETS)), default="svbrdf", show_default=True,
                  help="Texture-set layout (see 'svbrdf export --help')."),
     click.option("--crop", type=click.Choice(CROP_MODES), default=CROP_MODES[0], show_default=True,

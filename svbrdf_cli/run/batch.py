@@ -5,15 +5,18 @@
 failures with the same :func:`describe_failure`. Each photo is read, cropped and exposed while the
 previous one is in the model, and written as one atomic set (:func:`svbrdf_cli.run.pipeline.infer_set`)
 on a thread of its own while the next one is in the model; a bad photo is reported in one line
-and skipped.
+and skipped. The warnings a photo raises, on whichever thread, are collected (:func:`collect_warnings`)
+and reported with that photo's own line (:meth:`Report.warned`), naming it.
 """
 
 from __future__ import annotations
 
 import concurrent.futures
+import contextlib
 import dataclasses
 import logging
 import os
+import threading
 import time
 from typing import NamedTuple
 
@@ -42,6 +45,47 @@ class Job:
     reserved: tuple = ()     # names in ``output`` the run writes itself (batch: the gallery): no set takes one
 
 
+class _Collector(logging.Filter):
+    """On the ``svbrdf`` logger: a warning raised on a thread that collects them goes to its list
+    instead of the log."""
+
+    local = threading.local()
+
+    def filter(self, record):
+        sink = getattr(self.local, "sink", None)
+        if sink is None or record.levelno < logging.WARNING:
+            return True
+        sink.append(record.getMessage())
+        return False
+
+
+_COLLECTOR = _Collector()
+log.addFilter(_COLLECTOR)
+
+
+@contextlib.contextmanager
+def collect_warnings(sink):
+    """While the block runs, the ``svbrdf`` logger's warnings raised on this thread are appended to
+    the list ``sink`` (their messages) instead of being logged."""
+    before = getattr(_COLLECTOR.local, "sink", None)
+    _COLLECTOR.local.sink = sink
+    try:
+        yield sink
+    finally:
+        _COLLECTOR.local.sink = before
+
+
+def _collecting(sink, fn, *args, **kwargs):
+    """``fn(*args, **kwargs)`` with its warnings collected into ``sink``."""
+    with collect_warnings(sink):
+        return fn(*args, **kwargs)
+
+
+def naming(photo, message):
+    """A warning's message, naming ``photo`` unless it already does."""
+    return message if f"'{photo}'" in message else f"'{photo}': {message}"
+
+
 class Report:
     """What a run tells as it goes; this one tells nothing (:mod:`svbrdf_cli.cli` draws a terminal's)."""
 
@@ -53,6 +97,10 @@ class Report:
 
     def converted(self, photo, folder, record, seconds):
         """``photo`` became the set ``folder`` (``record``: its ``material.json``) in ``seconds``."""
+
+    def warned(self, photo, message):
+        """A warning about ``photo``, told right after its own line (converted or failed); ``message``
+        names it."""
 
     def advanced(self):
         """One more photo is finished (converted or failed)."""
@@ -150,11 +198,16 @@ def run_local(files, job, failures=None, report=None):
     from svbrdf_cli.infer.registry import load_model
 
     report = report or Report()
+    notes = {}  # photo -> its warnings, reported with its own line
 
     def err(msg):
         report.failed(msg)
         if failures is not None:
             failures.append(msg)
+
+    def tell_warnings(f):
+        for message in notes.pop(f, []):
+            report.warned(f, naming(f, message))
 
     todo, skipped, failed = plan_inputs(files, job, err)
     if not todo:
@@ -168,6 +221,7 @@ def run_local(files, job, failures=None, report=None):
     def report_failure(f, e):
         log.debug("details", exc_info=e)
         err(describe_failure(f, e))
+        tell_warnings(f)
 
     def finish(writing):
         """Wait for a set being written on the writer thread; report it (or its failure)."""
@@ -180,6 +234,7 @@ def run_local(files, job, failures=None, report=None):
         else:
             done += 1
             report.converted(f, folder, record, time.perf_counter() - t0)
+            tell_warnings(f)
         report.advanced()
 
     # Read and crop the next photo while the current one is in the networks, and write the previous
@@ -187,8 +242,11 @@ def run_local(files, job, failures=None, report=None):
     reader = concurrent.futures.ThreadPoolExecutor(max_workers=1)
     writer = concurrent.futures.ThreadPoolExecutor(max_workers=1)
     writing = None
+    def prepare(f):
+        return _collecting(notes.setdefault(f, []), pipeline.prepare, f, job.opts)
+
     with reader, writer:
-        pending = reader.submit(pipeline.prepare, todo[0], job.opts)
+        pending = reader.submit(prepare, todo[0])
         for i, f in enumerate(todo):
             t0 = time.perf_counter()
             try:
@@ -197,12 +255,12 @@ def run_local(files, job, failures=None, report=None):
                 prepared = None
                 report_failure(f, e)
             if i + 1 < len(todo):
-                pending = reader.submit(pipeline.prepare, todo[i + 1], job.opts)
+                pending = reader.submit(prepare, todo[i + 1])
             write = None
             if prepared is not None:
                 try:
-                    write = pipeline.infer_set(prepared, chain, job.output, job.opts, model_name=job.model,
-                                               progress=report.refine_step)
+                    write = _collecting(notes.setdefault(f, []), pipeline.infer_set, prepared, chain, job.output,
+                                        job.opts, model_name=job.model, progress=report.refine_step)
                 except Exception as e:  # noqa: BLE001
                     report_failure(f, e)
                 del prepared
@@ -210,7 +268,7 @@ def run_local(files, job, failures=None, report=None):
                 finish(writing)
                 writing = None
             if write is not None:
-                writing = (f, t0, writer.submit(write))
+                writing = (f, t0, writer.submit(_collecting, notes.setdefault(f, []), write))
             else:
                 report.advanced()
         if writing is not None:

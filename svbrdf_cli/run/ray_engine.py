@@ -28,7 +28,7 @@ import tempfile
 
 from svbrdf_cli.run import pipeline
 from svbrdf_cli.write.atomic import clean_partials
-from svbrdf_cli.run.batch import Counts, describe_failure, plan_inputs
+from svbrdf_cli.run.batch import Counts, collect_warnings, describe_failure, naming, plan_inputs
 from svbrdf_cli.errors import SvbrdfError
 from svbrdf_cli.infer.registry import check_model, load_model
 
@@ -118,6 +118,12 @@ class CaptureWorker:
         self.model, self.opts, self.store = model, opts, Store(output)
 
     def _one(self, path):
+        notes = []
+        with collect_warnings(notes):
+            row = self._convert(path)
+        return dict(row, warnings="\n".join(naming(path, m) for m in notes))
+
+    def _convert(self, path):
         try:
             prepared = pipeline.prepare(path, self.opts)
             if not self.store.remote:
@@ -136,7 +142,7 @@ class CaptureWorker:
     def __call__(self, batch):
         """Convert one batch of photos on this worker; a row per photo (its set or its failure)."""
         rows = [self._one(str(p)) for p in batch["path"]]
-        return {k: [r[k] for r in rows] for k in ("path", "folder", "error", "seconds")}
+        return {k: [r[k] for r in rows] for k in ("path", "folder", "error", "seconds", "warnings")}
 
 
 @contextlib.contextmanager
@@ -219,4 +225,6 @@ def run_ray(files, job, address=None, workers=None, err=print):
             done += 1
             if not quiet:
                 log.info("%s -> %s (%.1f s)", original, r["folder"], r["seconds"])
+        for line in (r or {}).get("warnings", "").splitlines():  # (a worker's warnings, naming the photo)
+            log.warning("%s", line.replace(p, original))
     return Counts(done, skipped, failed)

@@ -139,7 +139,7 @@ def test_a_batch_logged_to_a_file_is_one_line_per_photo(tmp_path):
     assert "\r" not in r.stderr
     lines = r.stderr.splitlines()
     assert sum(" -> " in line for line in lines) == 4 and lines[-1] == "4 done"
-    assert all(line.startswith(("WARNING:", "INFO:")) or " -> " in line or line == "4 done" for line in lines), lines
+    assert all(line.startswith(("WARNING:", "warning:", "INFO:")) or " -> " in line or line == "4 done" for line in lines), lines
 
 
 def test_batch_writes_a_gallery_of_every_set_and_the_failures(tmp_path):
