@@ -87,7 +87,8 @@ _CAPTURE_OPTIONS = [
     click.option("--corners", callback=corners, default=None, metavar="X1,Y1,...,X4,Y4",
                  help="Rectify this quadrilateral (pixels of the oriented photo, any order); overrides --crop."),
     click.option("--size", type=click.IntRange(MIN_SIZE, MAX_SIZE), default=None,
-                 help=f"Output map size in pixels ({MIN_SIZE}-{MAX_SIZE}; default: the crop's, at most 1024)."),
+                 help=f"Output map size in pixels ({MIN_SIZE}-{MAX_SIZE}; default: the largest power of two within "
+                      "the crop's side, 256-1024; above the crop's side, a warning)."),
     click.option("--exposure", callback=exposure, default="auto", show_default=True, metavar="auto|STOPS",
                  help="auto: expose as the networks were trained; or stops to add to the photo as shot."),
     click.option("--white-balance", "white_balance", callback=numbers(3, "R,G,B multipliers", True),

@@ -51,8 +51,10 @@ log = logging.getLogger("svbrdf")
 
 #: Output sizes accepted by ``--size``.
 MIN_SIZE, MAX_SIZE = 256, 4096
-#: Default output size cap: the crop's own resolution, at most this.
+#: Default output size cap: the largest power of two within the crop's own resolution, at most this.
 DEFAULT_SIZE = 1024
+#: ``--size`` above the crop's side by more than this factor is upsampling the photo never had: warned.
+UPSAMPLE_SLACK = 1.02
 #: Marker that a set is complete (the batch command skips such folders).
 RECORD = "material.json"
 
@@ -64,7 +66,7 @@ class Options:
     preset: str = "svbrdf"
     crop: str = "auto"
     corners: tuple | None = None
-    size: int | None = None                    # None: the crop's resolution, capped at DEFAULT_SIZE
+    size: int | None = None                    # None: a power of two within the crop's side (output_size)
     exposure: float | None = None              # stops; None: auto exposure
     white_balance: tuple | None = None         # (r, g, b) multipliers
     upsample: str = "guided"                   # or "bicubic"
@@ -85,10 +87,13 @@ class Options:
 # --------------------------------------------------------------------------
 
 def output_size(opts, crop_side):
-    """The output maps' side: ``--size``, else the crop's side within [MIN_SIZE, DEFAULT_SIZE]."""
+    """The output maps' side: ``--size``, else the largest power of two within the crop's side, in
+    [MIN_SIZE, DEFAULT_SIZE] (engines and the glTF validator expect powers of two; a smaller one
+    than the crop rather than pixels the photo does not have)."""
     if opts.size is not None:
         return int(opts.size)
-    return int(min(DEFAULT_SIZE, max(MIN_SIZE, crop_side)))
+    side = min(DEFAULT_SIZE, max(MIN_SIZE, int(crop_side)))
+    return 1 << (side.bit_length() - 1)
 
 
 def output_folder(out_root, photo_path):
@@ -133,6 +138,11 @@ def prepare(path, opts):
                                 "use a larger region or a sharper photo.")
     small = resize(c.image, NETWORK_SIZE)
     plausible.check_crop(path, photo.linear, c.image)
+    side, have = output_size(opts, c.image.shape[0]), c.image.shape[0]
+    if side > UPSAMPLE_SLACK * have:
+        log.warning("'%s': --size %d upsamples the crop's %d px %.1fx, detail the photo does not have; use "
+                    "--size %d or less (%d: a power of two), or photograph closer", path, side, have, side / have,
+                    have, output_size(Options(), have))
     try:
         gain = opts.exposure if opts.exposure is not None else auto_exposure_gain(small)
     except SvbrdfError as e:

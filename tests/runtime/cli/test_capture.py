@@ -200,3 +200,20 @@ def test_the_physical_estimate_runs_at_the_output_size(tmp_path):
     assert code == 0, out
     assert json.loads((tmp_path / "f" / "plaster" / "material.json").read_text())["upsampling"] == "guided"
 
+
+
+def test_default_sizes_are_powers_of_two_and_upsampling_is_warned(tmp_path):
+    from svbrdf_cli.imageio import write_image
+
+    photo = tmp_path / "wall.png"  # a 700 x 520 photo: a 520 px crop
+    rng = np.random.default_rng(0)
+    write_image(photo, (0.3 + 0.2 * rng.random((520, 700, 3))).astype(np.float32))
+    code, out = run("capture", photo, "-o", tmp_path / "o", "--no-preview", "--refine", 0)
+    assert code == 0, out
+    assert json.loads((tmp_path / "o" / "wall" / "material.json").read_text())["size"] == 512
+    assert read_image(tmp_path / "o" / "wall" / "diffuse.png").shape[:2] == (512, 512)
+    assert "upsample" not in out
+    code, out = run("capture", photo, "-o", tmp_path / "big", "--no-preview", "--refine", 0, "--size", 2048)
+    assert code == 0, out
+    warned = [ln for ln in out.splitlines() if ln.startswith("warning:")]
+    assert len(warned) == 1 and f"'{photo}'" in warned[0] and "upsamples the crop's 520 px 3.9x" in warned[0], out
