@@ -41,6 +41,7 @@ class Job:
     model: str = DEFAULT_MODEL
     threads: int = 0        # onnxruntime threads (0: one per core)
     skip_done: bool = False  # skip photos whose set is complete (batch: resume); else they fail without --force
+    redo: set = dataclasses.field(default_factory=set)  # photos whose complete set has other options: replaced
     quiet: bool = False
     reserved: tuple = ()     # names in ``output`` the run writes itself (batch: the gallery): no set takes one
 
@@ -150,11 +151,14 @@ def plan_inputs(files, job, err, store=None):
     """Which inputs to run: (todo, skipped count, failed count), errors reported through ``err``.
 
     Two inputs with the same stem (photo.jpg, photo.dng) would write the same folder: the second
-    fails. An existing set is skipped when complete and ``job.skip_done`` (batch), else it fails
-    unless ``job.opts.force``. ``store`` answers ``exists(stem)`` and ``complete(stem)`` (default:
-    local folders).
+    fails. An existing set is skipped when complete and ``job.skip_done`` (batch) and its
+    ``material.json`` records the same output options (:func:`svbrdf_cli.run.pipeline.options_differ`);
+    made with other ones, it is redone (added to ``job.redo``: replaced as ``--force`` would, which
+    keeps files svbrdf did not write). Otherwise it fails unless ``job.opts.force``. ``store``
+    answers ``exists(stem)``, ``complete(stem)`` and ``record(stem)`` (default: local folders).
     """
     seen, todo, failed, skipped = {}, [], 0, 0
+    changed = {}
     for f in files:
         folder = pipeline.output_folder(job.output, f)
         stem = os.path.basename(folder)
@@ -171,14 +175,45 @@ def plan_inputs(files, job, err, store=None):
         exists = store.exists(stem) if store else os.path.exists(folder)
         if exists and not job.opts.force:
             if job.skip_done and (store.complete(stem) if store else pipeline.is_complete(folder)):
-                log.info("skip %s: %s is complete", f, folder)
-                skipped += 1
+                record = store.record(stem) if store else read_record(folder)
+                differ = pipeline.options_differ(record, job.opts, job.model)
+                if not differ:
+                    log.info("skip %s: %s is complete", f, folder)
+                    skipped += 1
+                    continue
+                log.info("redo %s: %s was made with other %s", f, folder, ", ".join(differ))
+                changed[f] = differ
+                job.redo.add(f)
+                todo.append(f)
                 continue
             err(f"'{folder}' already exists (from '{f}'); use --force to replace it.")
             failed += 1
             continue
         todo.append(f)
+    if changed:
+        cli = {"fmt": "format", "ao": "no-ao", "preview": "no-preview"}
+        names = sorted({"--" + cli.get(k, k).replace("_", "-") for v in changed.values() for k in v})
+        log.warning("%d complete set%s in '%s' made with other options (%s): redoing %s", len(changed),
+                    "" if len(changed) == 1 else "s", job.output, ", ".join(names),
+                    "it" if len(changed) == 1 else "them")
     return todo, skipped, failed
+
+
+def read_record(folder):
+    """A set's ``material.json`` as a dict, or None when it cannot be read."""
+    import json
+
+    try:
+        with open(os.path.join(folder, pipeline.RECORD), encoding="utf-8") as fh:
+            data = json.load(fh)
+    except (OSError, ValueError):
+        return None
+    return data if isinstance(data, dict) else None
+
+
+def options_for(job, f):
+    """The options photo ``f`` runs with: the job's, replacing its set when it is redone."""
+    return dataclasses.replace(job.opts, force=True) if f in job.redo else job.opts
 
 
 def describe_failure(f, e):
@@ -243,7 +278,7 @@ def run_local(files, job, failures=None, report=None):
     writer = concurrent.futures.ThreadPoolExecutor(max_workers=1)
     writing = None
     def prepare(f):
-        return _collecting(notes.setdefault(f, []), pipeline.prepare, f, job.opts)
+        return _collecting(notes.setdefault(f, []), pipeline.prepare, f, options_for(job, f))
 
     with reader, writer:
         pending = reader.submit(prepare, todo[0])
@@ -260,7 +295,7 @@ def run_local(files, job, failures=None, report=None):
             if prepared is not None:
                 try:
                     write = _collecting(notes.setdefault(f, []), pipeline.infer_set, prepared, chain, job.output,
-                                        job.opts, model_name=job.model, progress=report.refine_step)
+                                        options_for(job, f), model_name=job.model, progress=report.refine_step)
                 except Exception as e:  # noqa: BLE001
                     report_failure(f, e)
                 del prepared

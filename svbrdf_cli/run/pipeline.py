@@ -96,6 +96,31 @@ def output_size(opts, crop_side):
     return 1 << (side.bit_length() - 1)
 
 
+#: Options that do not change a set's files (how the run goes, not what it makes).
+_NOT_OUTPUT = ("force",)
+
+
+def output_options(opts, model):
+    """What a set's files depend on besides its photo and the tool: ``material.json`` records it under
+    ``options``, and a batch that resumes redoes a set recorded with other ones (:func:`options_differ`)."""
+    out = {k: v for k, v in dataclasses.asdict(opts).items() if k not in _NOT_OUTPUT}
+    return _jsonable({**out, "model": model})
+
+
+def options_differ(record, opts, model):
+    """The names of the output options in which the set's ``record`` (its ``material.json``) differs
+    from ``opts`` and ``model``. A record from before ``options`` was recorded is compared on what it
+    has (preset, bits, format, tileable, model)."""
+    want = output_options(opts, model)
+    record = record if isinstance(record, dict) else {}
+    had = record.get("options")
+    if not isinstance(had, dict):
+        legacy = {"preset": record.get("preset"), "bits": record.get("bits"), "fmt": record.get("format"),
+                  "tileable": record.get("tileable"), "model": (record.get("model") or {}).get("name")}
+        return sorted(k for k, v in legacy.items() if v is not None and v != want[k])
+    return sorted(k for k in want if had.get(k) != want[k])
+
+
 def output_folder(out_root, photo_path):
     """``OUT/<photo stem>``: the contract benchmarks rely on."""
     return os.path.join(os.fspath(out_root), os.path.splitext(os.path.basename(os.fspath(photo_path)))[0])
@@ -249,6 +274,7 @@ def infer_set(prepared, chain, out_root, opts, model_name="fast", progress=None)
         "network_size": NETWORK_SIZE, "size": side,
         "upsampling": upsampling,
         "preset": opts.preset, "bits": opts.bits, "format": opts.fmt, "tileable": opts.tileable,
+        "options": output_options(opts, model_name),
     }
     if tiling is not None:
         record["tiling"] = tiling

@@ -163,3 +163,30 @@ def test_batch_writes_a_gallery_of_every_set_and_the_failures(tmp_path):
     assert run("batch", d, "-o", out, "--preset", "unreal", "--size", 256)[0] == 0
     page = (out / "index.html").read_text()
     assert "2 texture sets" in page and "broken.jpg" not in page and 'href="oak/viewer.html"' in page
+
+
+def test_resume_redoes_sets_made_with_other_options_and_keeps_the_users_files(tmp_path):
+    d = tmp_path / "in"
+    d.mkdir()
+    for i in range(2):
+        make_photo(d / f"p{i}.png", 300, 400, seed=i)
+    out = tmp_path / "out"
+    base = ["batch", d, "-o", out, "--size", 256, "--no-preview", "--refine", 0]
+    code, text = run(*base)
+    assert code == 0 and text.strip().endswith("2 done"), text
+    (out / "p0" / "notes.txt").write_text("mine")  # the user's file inside a set
+    code, text = run(*base)
+    assert code == 0 and "2 already done" in text, text
+    before = (out / "p1" / "material.json").read_text()
+    # the same batch for Unreal at another size: every set is redone (it was reported "already done")
+    code, text = run("batch", d, "-o", out, "--size", 512, "--no-preview", "--refine", 0, "--preset", "unreal")
+    assert code == 0 and text.strip().endswith("2 done") and "already done" not in text, text
+    assert "made with other options (--preset, --size)" in text, text
+    for i in range(2):
+        rec = json.loads((out / f"p{i}" / "material.json").read_text())
+        assert rec["options"]["preset"] == "unreal" and rec["size"] == 512
+        assert (out / f"p{i}" / f"T_p{i}_BC.png").is_file() and not (out / f"p{i}" / "diffuse.png").exists()
+    assert (out / "p0" / "notes.txt").read_text() == "mine"
+    assert (out / "p1" / "material.json").read_text() != before
+    code, text = run("batch", d, "-o", out, "--size", 512, "--no-preview", "--refine", 0, "--preset", "unreal")
+    assert code == 0 and "2 already done" in text, text
