@@ -98,9 +98,10 @@ _CAPTURE_OPTIONS = [
                  help="How maps reach --size from the networks' 256 px."),
     bits_opt(), format_opt(),
     click.option("--debug", is_flag=True, help="Also write debug/: network input, masks, auxiliary renderings."),
-    click.option("--confidence", is_flag=True,
-                 help="Also write confidence/<map>.png: where the maps of rotated and mirrored copies of the "
-                      "photo agree (white) or not (dark). Runs the networks 5 times."),
+    click.option("--confidence", is_flag=True, help="Also write confidence/<map>.png: white where a map can be trusted. "
+                 "Physical estimate: diffuse where the photo is not clipped, swamped by the highlight, too dark or far "
+                 "from the flash; roughness where the highlight shows; none for its assumed normal and specular. "
+                 "A network: where its maps of 5 rotated and mirrored copies agree (it runs 5 times)."),
     click.option("--no-preview", is_flag=True, help="Skip preview.png."),
     click.option("--no-ao", is_flag=True, help="Constant ambient occlusion (1) instead of one from the height."),
     click.option("--tileable", is_flag=True, help="Seamless maps: every map cross-faded, one axis at a time, with a "

@@ -255,9 +255,9 @@ def infer_set(prepared, chain, out_root, opts, model_name="fast", progress=None)
     t2 = time.perf_counter()
     timings["upsample"] = t2 - t_up
     timings["network"] = t1 - t0
-    conf = None
+    conf = conf_record = None
     if opts.confidence:
-        conf = confidence_maps(chain.used, net_in, {k: out[k] for k in cv.MAP_NAMES}, side)
+        conf, conf_record = _confidence(chain.used, net_in, {k: out[k] for k in cv.MAP_NAMES}, side)
         timings["confidence"] = time.perf_counter() - t2
 
     record = {
@@ -281,13 +281,27 @@ def infer_set(prepared, chain, out_root, opts, model_name="fast", progress=None)
     if refined is not None:
         record.update(refined)
     if conf is not None:
-        from svbrdf_cli.infer import tta
-
-        record["confidence"] = {"passes": len(tta.CONFIDENCE_PASSES), "half_at_disagreement": tta.CONFIDENCE_HALF,
-                                "mean": {k: round(float(v.mean()), 4) for k, v in conf.items()}}
+        record["confidence"] = {**conf_record, "mean": {k: round(float(v.mean()), 4) for k, v in conf.items()}}
 
     # (the photo's path, not the Prepared: its decoded photo is not kept while the set is written)
     return functools.partial(_write_set, p.path, folder, opts, record, timings, stored, maps, net_in, out, conf)
+
+
+def _confidence(model, net_in, stored, side):
+    """``--confidence``: ({map: (side, side) confidence}, what ``material.json`` says of them). A network:
+    its rotated and mirrored passes' agreement (:mod:`svbrdf_cli.infer.tta`); the physical estimate:
+    what it read off the photo where (:mod:`svbrdf_cli.infer.physical_confidence`), for the maps it
+    measures only."""
+    from svbrdf_cli.infer import physical_confidence as pc, tta
+    from svbrdf_cli.infer.physical import NAME as PHYSICAL
+
+    if getattr(model, "tier", None) != PHYSICAL:
+        return (confidence_maps(model, net_in, stored, side),
+                {"method": "agreement of rotated and mirrored passes", "passes": len(tta.CONFIDENCE_PASSES),
+                 "half_at_disagreement": tta.CONFIDENCE_HALF})
+    conf = {k: np.clip(resize(v[..., None], side)[..., 0], 0, 1) for k, v in pc.confidence(net_in).items()}
+    return conf, {"method": "physical estimate: where the photo shows each map (svbrdf_cli.infer.physical_confidence)",
+                  "not_measured": pc.NOT_MEASURED}
 
 
 def _write_set(path, folder, opts, record, timings, stored, maps, net_in, out, conf):

@@ -217,3 +217,25 @@ def test_default_sizes_are_powers_of_two_and_upsampling_is_warned(tmp_path):
     assert code == 0, out
     warned = [ln for ln in out.splitlines() if ln.startswith("warning:")]
     assert len(warned) == 1 and f"'{photo}'" in warned[0] and "upsamples the crop's 520 px 3.9x" in warned[0], out
+
+
+def test_confidence_of_the_default_model_says_where_the_photo_shows_the_maps(tmp_path):
+    code, out = run("capture", SAMPLE, "-o", tmp_path, "--size", 256, "--confidence", "--no-preview")
+    assert code == 0, out
+    folder = tmp_path / "glazed_tiles"
+    rec = json.loads((folder / "material.json").read_text())
+    # the physical estimate measures the diffuse and roughness; it assumes the normal and specular
+    assert sorted(os.listdir(folder / "confidence")) == ["diffuse.png", "roughness.png"]
+    assert sorted(rec["confidence"]["not_measured"]) == ["normal", "specular"]
+    c = read_image(folder / "confidence" / "diffuse.png")
+    c = c[..., 0] if c.ndim == 3 else c
+    assert c.min() < 0.05 and c.max() > 0.95  # not all white (it was: every pixel 255)
+    # lowest under the flash (its highlight clipped there: the diffuse was filled in), high away from it
+    yy, xx = np.mgrid[0:256, 0:256]
+    r = np.hypot(xx - 128, yy - 128)
+    assert c[r < 12].mean() < 0.2 < 0.8 < c[(r > 90) & (r < 110)].mean()
+    rough = read_image(folder / "confidence" / "roughness.png")
+    rough = rough[..., 0] if rough.ndim == 3 else rough
+    assert rough[(r > 40) & (r < 60)].mean() > rough[r > 120].mean() + 0.3  # where the highlight showed
+    code, out = run("capture", "--help")
+    assert "Runs the networks 5 times" not in out and "assumed normal and specular" in " ".join(out.split())
