@@ -15,7 +15,8 @@ def view_cmd(mapset, size, open_):
     """Write MAPSET/viewer.html: the material under a light that follows the mouse.
 
     A self-contained page (the maps embedded, nothing fetched) rendering the
-    native set with the same Cook-Torrance model as the tool, with toggles
+    set (native, or written by svbrdf with any preset) with the same
+    Cook-Torrance model as the tool, with toggles
     for each map, 1-3x tiling and the light's intensity and height.
 
     \b

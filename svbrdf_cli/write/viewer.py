@@ -1,4 +1,4 @@
-"""``svbrdf view SET``: a self-contained ``viewer.html`` beside a native texture set.
+"""``svbrdf view SET``: a self-contained ``viewer.html`` beside a texture set (native, or a preset's).
 
 The page shows the material on a plane under a point light that follows the mouse, rendered by a
 small hand-written WebGL shader with our conventions: the same Cook-Torrance (GGX, Smith-Schlick
@@ -18,10 +18,14 @@ import html
 import json
 import os
 
+import numpy as np
+
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.write import ownership
 from svbrdf_cli.write.atomic import write_text
-from svbrdf_cli.errors import ImageWriteError, MapSetError
+from svbrdf_cli.errors import ImageWriteError
+from svbrdf_cli.write.mapset import linear_to_stored
+from svbrdf_cli.write.readback import is_native, read_any_set
 
 #: The viewer's file name in the set's folder.
 VIEWER = "viewer.html"
@@ -149,15 +153,26 @@ def _data_uri(path):
         return "data:image/png;base64," + base64.b64encode(f.read()).decode("ascii")
 
 
+def _png_uri(pixels):
+    """An (H, W, 3) image in [0, 1] as an 8-bit PNG data URI."""
+    import cv2
+
+    x = (np.clip(np.asarray(pixels, np.float32), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+    ok, buf = cv2.imencode(".png", np.ascontiguousarray(x[..., ::-1]))
+    return "data:image/png;base64," + base64.b64encode(buf.tobytes()).decode("ascii")
+
+
+def _maps(folder):
+    """{map: data URI} of a native set's files, or of a preset's set read back and stored in our encoding."""
+    if is_native(folder):
+        return {k: _data_uri(os.path.join(folder, f"{k}.png")) for k in cv.MAP_NAMES}
+    stored = linear_to_stored(read_any_set(folder))
+    return {k: _png_uri(stored[k][..., :3]) for k in cv.MAP_NAMES}
+
+
 def page(folder, size=512):
-    """The viewer's HTML for the native set in ``folder``."""
-    maps = {}
-    for k in cv.MAP_NAMES:
-        path = os.path.join(folder, f"{k}.png")
-        if not os.path.isfile(path):
-            raise MapSetError(f"'{folder}' has no {k}.png; 'svbrdf view' shows a native set "
-                              "(svbrdf capture's default preset).")
-        maps[k] = _data_uri(path)
+    """The viewer's HTML for the set in ``folder`` (native, or a preset's: :mod:`svbrdf_cli.write.readback`)."""
+    maps = _maps(folder)
     fragment = _FRAGMENT % {"eps": f"{cv.EPS:.8f}",
                             "albedo_gamma": f"{cv.ALBEDO_GAMMA:.4f}", "image_gamma": f"{cv.IMAGE_GAMMA:.4f}",
                             "f0": f"{cv.DIELECTRIC_F0:.4f}", "half": f"{cv.SURFACE_HALF_SIZE:.4f}"}
