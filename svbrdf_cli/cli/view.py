@@ -7,8 +7,8 @@ import click
 
 @click.command("view")
 @click.argument("mapset", type=click.Path(exists=True, file_okay=False))
-@click.option("--size", type=click.IntRange(128, 4096), default=512, show_default=True,
-              help="Canvas size in pixels.")
+@click.option("--size", type=click.IntRange(128, 4096), default=2048, show_default=True,
+              help="Largest canvas resolution in pixels (the canvas fills the window, up to this).")
 @click.option("--open/--no-open", "open_", default=None,
               help="Open it in a browser (default: when run from a terminal).")
 def view_cmd(mapset, size, open_):
