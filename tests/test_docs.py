@@ -200,3 +200,21 @@ def test_every_runnable_module_is_documented():
             runnable.add(name)
     missing = sorted(runnable - modules)
     assert not missing, "python -m modules no doc shows how to run:\n" + "\n".join(missing)
+
+
+def test_readme_top_commands_are_what_ci_runs_and_say_what_they_cost():
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    ci = (ROOT / ".ci" / "run").read_text(encoding="utf-8")
+    blocks = re.findall(r"```bash\n(.*?)\n```", readme, re.S)
+    run_cmd, test_cmd = blocks[0].strip(), blocks[1].strip()
+    assert "svbrdf capture examples/glazed_tiles.jpg" in run_cmd and "pip install ." in run_cmd
+    # the test command's steps, in .ci/run's order
+    steps = [s.strip().replace(".venv/bin/", "") for s in test_cmd.split("&&")]
+    assert steps[-1] == "python -m pytest -q" and ".venv/bin/python -m pytest -q" in ci
+    for step in steps[1:-1]:
+        assert step.removeprefix("pip install ").strip() in ci, step
+    top = readme[: readme.index("## Using it")]
+    assert "10-15 minutes" in top and "2 GB" in top
+    assert "--index-url https://download.pytorch.org/whl/cpu" in top  # the CPU build elsewhere
+    status = readme[readme.index("## Status"): readme.index("## Method")]
+    assert "without the flash spot" not in status and "docs/benchmarks.md" in status

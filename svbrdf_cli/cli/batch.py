@@ -23,8 +23,10 @@ ENGINES = ("local", "ray")
 def batch_cmd(folder, job, engine, address, workers):
     """Convert every photo in FOLDER; rerun to resume.
 
-    Photos whose texture set is already complete in OUTPUT are skipped (so an
-    interrupted batch resumes where it stopped; --force redoes them). Sets are
+    Photos whose texture set is already complete in OUTPUT, made with the same
+    options, are skipped (so an interrupted batch resumes where it stopped);
+    sets made with other options (--preset, --size, ...) are redone, and
+    --force redoes them all. Sets are
     written whole or not at all, a bad photo is reported and skipped, and the
     exit code is 1 if any photo failed. OUTPUT/index.html shows every set in
     the folder (photo, maps, preview) and this run's failures.

@@ -1,4 +1,4 @@
-"""``svbrdf export``: re-target a native map set to an engine's texture-set layout."""
+"""``svbrdf export``: re-target a texture set (native, or another preset's) to an engine's texture-set layout."""
 
 import click
 
@@ -17,11 +17,12 @@ from svbrdf_cli.write.presets import PRESETS
 @force_opt("an existing output folder (atomically)")
 @click.option("--no-ao", is_flag=True, help="Constant ambient occlusion (1) instead of one from the height.")
 @click.option("--name", default=None, help="The material's name in Unreal, Unity and Blender file names "
-                                           "(default: the output folder's).")
+                                           "(default: the set's material: the name or photo it was captured from).")
 def export_cmd(mapset, output, preset, bits, fmt, force, no_ao, name):
-    """Write a native map set as an engine or DCC texture set, without re-running inference.
+    """Write a texture set as an engine or DCC texture set, without re-running inference.
 
-    Reads MAPSET (normal/diffuse/roughness/specular.png), converts the
+    Reads MAPSET (a native set, normal/diffuse/roughness/specular.png, or one
+    svbrdf wrote with another preset, through its texture_set.json), converts the
     specular workflow to metallic-roughness where the preset needs it
     (glTF's solveMetallic), flips the normal map's green channel for Unreal,
     integrates a 16-bit height map from the normals, and writes the whole set
@@ -34,12 +35,12 @@ def export_cmd(mapset, output, preset, bits, fmt, force, no_ao, name):
       svbrdf export out/wood -o wood_gltf --preset gltf --bits 16
       svbrdf export out/wood -o wood_blend --preset blender --format exr --force
     """
-    from svbrdf_cli.write.mapset import read_map_set
     from svbrdf_cli.write.presets import write_preset
+    from svbrdf_cli.write.readback import material_name, read_any_set
 
     check_format(preset, fmt)
-    maps = read_map_set(mapset)
-    paths = write_preset(preset, output, maps, bits=int(bits), fmt=fmt, force=force, protect=(mapset,), name=name,
-                         ao=not no_ao)
+    maps = read_any_set(mapset)
+    paths = write_preset(preset, output, maps, bits=int(bits), fmt=fmt, force=force, protect=(mapset,),
+                         name=name or material_name(mapset), ao=not no_ao)
     h, w = maps["normal"].shape[:2]
     click.echo(f"wrote {output} ({preset}, {len(paths)} files, {w}x{h})", err=True)

@@ -13,7 +13,7 @@ from svbrdf_cli import conventions as cv
 from svbrdf_cli.run.batch import Job
 from svbrdf_cli.errors import OutputExistsError
 from svbrdf_cli.infer.registry import DEFAULT_MODEL
-from svbrdf_cli.cli.values import corners, exposure, light, numbers
+from svbrdf_cli.cli.values import corners, exposure, light, model_help, model_value, numbers
 from svbrdf_cli.run.pipeline import MAX_SIZE, MIN_SIZE, Options
 from svbrdf_cli.infer.upsample import UPSAMPLE_METHODS
 from svbrdf_cli.write.presets import FORMATS, PNG_BITS, PNG_ONLY_PRESETS, PRESETS
@@ -77,10 +77,8 @@ def check_format(preset, fmt):
 _CAPTURE_OPTIONS = [
     click.option("-o", "--output", required=True, type=click.Path(file_okay=False),
                  help="Folder for the texture sets: one sub-folder per photo, named after it."),
-    click.option("--model", default=DEFAULT_MODEL, show_default=True,
-                 help="'physical' (the maps computed from the flash physics: today's most accurate), a network "
-                      "tier (lite, fast, balanced, best), 'auto' (per photo, the cheapest of physical and the "
-                      "installed tiers that is good enough for it) or a folder of exported models."),
+    click.option("--model", default=DEFAULT_MODEL, show_default=True, callback=model_value,
+                 help=model_help()),
     click.option("--preset", type=click.Choice(list(PRESETS)), default="svbrdf", show_default=True,
                  help="Texture-set layout (see 'svbrdf export --help')."),
     click.option("--crop", type=click.Choice(CROP_MODES), default=CROP_MODES[0], show_default=True,
@@ -89,7 +87,8 @@ _CAPTURE_OPTIONS = [
     click.option("--corners", callback=corners, default=None, metavar="X1,Y1,...,X4,Y4",
                  help="Rectify this quadrilateral (pixels of the oriented photo, any order); overrides --crop."),
     click.option("--size", type=click.IntRange(MIN_SIZE, MAX_SIZE), default=None,
-                 help=f"Output map size in pixels ({MIN_SIZE}-{MAX_SIZE}; default: the crop's, at most 1024)."),
+                 help=f"Output map size in pixels ({MIN_SIZE}-{MAX_SIZE}; default: the largest power of two within "
+                      "the crop's side, 256-1024; above the crop's side, a warning)."),
     click.option("--exposure", callback=exposure, default="auto", show_default=True, metavar="auto|STOPS",
                  help="auto: expose as the networks were trained; or stops to add to the photo as shot."),
     click.option("--white-balance", "white_balance", callback=numbers(3, "R,G,B multipliers", True),
@@ -99,13 +98,15 @@ _CAPTURE_OPTIONS = [
                  help="How maps reach --size from the networks' 256 px."),
     bits_opt(), format_opt(),
     click.option("--debug", is_flag=True, help="Also write debug/: network input, masks, auxiliary renderings."),
-    click.option("--confidence", is_flag=True,
-                 help="Also write confidence/<map>.png: where the maps of rotated and mirrored copies of the "
-                      "photo agree (white) or not (dark). Runs the networks 5 times."),
+    click.option("--confidence", is_flag=True, help="Also write confidence/<map>.png: white where a map can be trusted. "
+                 "Physical estimate: diffuse where the photo is not clipped, swamped by the highlight, too dark or far "
+                 "from the flash; roughness where the highlight shows; none for its assumed normal and specular. "
+                 "A network: where its maps of 5 rotated and mirrored copies agree (it runs 5 times)."),
     click.option("--no-preview", is_flag=True, help="Skip preview.png."),
     click.option("--no-ao", is_flag=True, help="Constant ambient occlusion (1) instead of one from the height."),
-    click.option("--tileable", is_flag=True, help="Seamless maps: every map cross-faded with its half-shifted "
-                                                  "copy near the borders, so the set tiles without a seam."),
+    click.option("--tileable", is_flag=True, help="Seamless maps: every map cross-faded, one axis at a time, with a "
+                                                  "copy of itself shifted in step with its pattern (a regular pattern "
+                                                  "first cut to whole repeats), so a tiling shows no seam."),
     click.option("--refine", type=click.IntRange(0, MAX_ITERATIONS), default=DEFAULT_ITERATIONS, show_default=True,
                  is_flag=False, flag_value=DEFAULT_ITERATIONS, metavar="[N]",
                  help="Steps fitting the maps to the photo under its own flash (about 2.5 s; 0: off, the "

@@ -49,6 +49,10 @@ class TerminalReport(Report):
             how = crop["mode"] + (f" on the {crop['anchor']}" if crop.get("anchor") else "")
             self._write(f"{photo} -> {folder} ({record['size']}x{record['size']}, crop {how}, {seconds:.1f} s)")
 
+    def warned(self, photo, message):
+        """Write the warning line under the photo's own line."""
+        self._write(f"warning: {message}")
+
     def advanced(self):
         """Advance the photos' bar."""
         if self.bar is not None:

@@ -16,7 +16,8 @@ from svbrdf_cli.cli.values import positive, stops
               help="Exposure change in stops.")
 @force_opt("an existing image")
 def render_cmd(maps, output, light, intensity, exposure, force):
-    """Relight a native map set (normal/diffuse/roughness/specular.png).
+    """Relight a texture set: native (normal/diffuse/roughness/specular.png) or
+    written by svbrdf with any preset (read through its texture_set.json).
 
     Renders the maps as a flat surface under a point light with the same
     Cook-Torrance model the networks were trained with, and writes the
@@ -30,11 +31,11 @@ def render_cmd(maps, output, light, intensity, exposure, force):
     """
     from svbrdf_cli import conventions as cv
     from svbrdf_cli.imageio import write_image
-    from svbrdf_cli.write.mapset import read_map_set
+    from svbrdf_cli.write.readback import read_any_set
     from svbrdf_cli.shading import render_maps
 
     refuse_existing(output, force)
-    m = read_map_set(maps)
+    m = read_any_set(maps)
     kwargs = {"light": light or cv.FLASH_POSITION}
     kwargs["intensity"] = (intensity if intensity is not None else cv.LIGHT_INTENSITY) * 2.0 ** exposure
     img = cv.image_to_encoded(render_maps(m, **kwargs))

@@ -1,10 +1,12 @@
-"""Parsing option values: numbers, corners, exposure stops (a usage error, exit 2, when malformed)."""
+"""Parsing option values: numbers, corners, exposure stops, models (a usage error, exit 2, when malformed)."""
 
 import math
 
 import click
 
+from svbrdf_cli.infer.chain import ModelError, installed_tiers
 from svbrdf_cli.infer.exposure import MAX_EXPOSURE_STOPS
+from svbrdf_cli.infer.registry import AUTO, check_model
 
 
 def numbers(count, what, positive=False):
@@ -60,3 +62,21 @@ def light(ctx, param, value):
     if xyz is not None and xyz[2] <= 0:
         raise click.BadParameter(f"the light must be above the surface (Z > 0); got '{value}'.")
     return xyz
+
+
+def model_value(ctx, param, value):
+    """``--model``: a name that is not installed, or a folder that does not exist, is a usage error."""
+    try:
+        check_model(value)
+    except ModelError as e:
+        raise click.BadParameter(str(e)) from None
+    return value
+
+
+def model_help():
+    """``--model``'s help: what it accepts, naming the networks installed here (only those)."""
+    tiers = installed_tiers()
+    return ("'physical' (the maps computed from the flash physics: today's most accurate)"
+            + (f", an installed network ({', '.join(tiers)})" if tiers else "")
+            + f", '{AUTO}' (per photo, the cheapest of physical and the installed networks that is good enough "
+              "for it) or a folder of exported models.")

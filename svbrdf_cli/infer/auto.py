@@ -77,14 +77,14 @@ def signal(name, image, maps, chain):
 def load_rule(path=RULE_FILE):
     """The calibrated rule (a dict; see the module docstring), checked against the installed tiers."""
     if not os.path.isfile(path):
-        raise ModelError(f"--model auto needs its rule '{path}', which is missing; reinstall svbrdf or pick a "
-                         f"tier ({', '.join(installed_tiers()) or 'none installed'}).")
+        raise ModelError(f"--model auto needs its rule '{path}', which is missing; reinstall svbrdf or leave "
+                         "--model out for the default (physical).")
     with open(path) as f:
         rule = json.load(f)
     missing = [t for t in rule["ladder"] if t not in available_tiers()]
     if missing:
         raise ModelError(f"--model auto steps between {', '.join(rule['ladder'])}, but {', '.join(missing)} "
-                         f"is not installed; pick --model {installed_tiers()[0] if installed_tiers() else 'FOLDER'}.")
+                         "is not installed; leave --model out for the default (physical).")
     if len(rule["steps"]) != len(rule["ladder"]) - 1 or any(s["signal"] not in SIGNALS for s in rule["steps"]):
         raise ModelError(f"'{path}' is not a rule this version understands; re-run python -m export.studies.auto_calibration.")
     return rule

@@ -25,14 +25,21 @@ def model_folder(model):
     """``--model`` value (a tier name or a folder) -> the folder holding its ONNX files."""
     if model in TIERS:
         if model not in installed_tiers():
-            have = ", ".join(installed_tiers()) or "none"
-            raise ModelError(f"The '{model}' model is not installed (installed: {have}); "
-                             f"use --model {installed_tiers()[0] if installed_tiers() else 'FOLDER'}.")
+            raise ModelError(f"the '{model}' model is not installed (installed: {', '.join(model_names())}); "
+                             f"leave --model out for the default ({DEFAULT_MODEL}).")
         return os.path.join(MODELS_DIR, model)
     if os.path.isdir(model):
         return model
-    raise ModelError(f"--model '{model}' is neither a tier ({', '.join(TIERS)}), 'auto', "
-                     "nor a folder of exported models.")
+    raise ModelError(f"'{model}' is neither an installed model ({', '.join(model_names())}) nor a folder of "
+                     f"exported models; leave --model out for the default ({DEFAULT_MODEL}).")
+
+
+def model_names():
+    """What ``--model`` accepts by name here: the physical estimate, the installed tiers and, when its
+    rule is installed, ``auto``."""
+    from svbrdf_cli.infer.auto import RULE_FILE
+
+    return [PHYSICAL, *installed_tiers(), *([AUTO] if os.path.isfile(RULE_FILE) else [])]
 
 
 def load_model(model, threads=0):

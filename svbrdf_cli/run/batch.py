@@ -5,15 +5,18 @@
 failures with the same :func:`describe_failure`. Each photo is read, cropped and exposed while the
 previous one is in the model, and written as one atomic set (:func:`svbrdf_cli.run.pipeline.infer_set`)
 on a thread of its own while the next one is in the model; a bad photo is reported in one line
-and skipped.
+and skipped. The warnings a photo raises, on whichever thread, are collected (:func:`collect_warnings`)
+and reported with that photo's own line (:meth:`Report.warned`), naming it.
 """
 
 from __future__ import annotations
 
 import concurrent.futures
+import contextlib
 import dataclasses
 import logging
 import os
+import threading
 import time
 from typing import NamedTuple
 
@@ -38,8 +41,50 @@ class Job:
     model: str = DEFAULT_MODEL
     threads: int = 0        # onnxruntime threads (0: one per core)
     skip_done: bool = False  # skip photos whose set is complete (batch: resume); else they fail without --force
+    redo: set = dataclasses.field(default_factory=set)  # photos whose complete set has other options: replaced
     quiet: bool = False
     reserved: tuple = ()     # names in ``output`` the run writes itself (batch: the gallery): no set takes one
+
+
+class _Collector(logging.Filter):
+    """On the ``svbrdf`` logger: a warning raised on a thread that collects them goes to its list
+    instead of the log."""
+
+    local = threading.local()
+
+    def filter(self, record):
+        sink = getattr(self.local, "sink", None)
+        if sink is None or record.levelno < logging.WARNING:
+            return True
+        sink.append(record.getMessage())
+        return False
+
+
+_COLLECTOR = _Collector()
+log.addFilter(_COLLECTOR)
+
+
+@contextlib.contextmanager
+def collect_warnings(sink):
+    """While the block runs, the ``svbrdf`` logger's warnings raised on this thread are appended to
+    the list ``sink`` (their messages) instead of being logged."""
+    before = getattr(_COLLECTOR.local, "sink", None)
+    _COLLECTOR.local.sink = sink
+    try:
+        yield sink
+    finally:
+        _COLLECTOR.local.sink = before
+
+
+def _collecting(sink, fn, *args, **kwargs):
+    """``fn(*args, **kwargs)`` with its warnings collected into ``sink``."""
+    with collect_warnings(sink):
+        return fn(*args, **kwargs)
+
+
+def naming(photo, message):
+    """A warning's message, naming ``photo`` unless it already does."""
+    return message if f"'{photo}'" in message else f"'{photo}': {message}"
 
 
 class Report:
@@ -53,6 +98,10 @@ class Report:
 
     def converted(self, photo, folder, record, seconds):
         """``photo`` became the set ``folder`` (``record``: its ``material.json``) in ``seconds``."""
+
+    def warned(self, photo, message):
+        """A warning about ``photo``, told right after its own line (converted or failed); ``message``
+        names it."""
 
     def advanced(self):
         """One more photo is finished (converted or failed)."""
@@ -102,11 +151,14 @@ def plan_inputs(files, job, err, store=None):
     """Which inputs to run: (todo, skipped count, failed count), errors reported through ``err``.
 
     Two inputs with the same stem (photo.jpg, photo.dng) would write the same folder: the second
-    fails. An existing set is skipped when complete and ``job.skip_done`` (batch), else it fails
-    unless ``job.opts.force``. ``store`` answers ``exists(stem)`` and ``complete(stem)`` (default:
-    local folders).
+    fails. An existing set is skipped when complete and ``job.skip_done`` (batch) and its
+    ``material.json`` records the same output options (:func:`svbrdf_cli.run.pipeline.options_differ`);
+    made with other ones, it is redone (added to ``job.redo``: replaced as ``--force`` would, which
+    keeps files svbrdf did not write). Otherwise it fails unless ``job.opts.force``. ``store``
+    answers ``exists(stem)``, ``complete(stem)`` and ``record(stem)`` (default: local folders).
     """
     seen, todo, failed, skipped = {}, [], 0, 0
+    changed = {}
     for f in files:
         folder = pipeline.output_folder(job.output, f)
         stem = os.path.basename(folder)
@@ -123,14 +175,45 @@ def plan_inputs(files, job, err, store=None):
         exists = store.exists(stem) if store else os.path.exists(folder)
         if exists and not job.opts.force:
             if job.skip_done and (store.complete(stem) if store else pipeline.is_complete(folder)):
-                log.info("skip %s: %s is complete", f, folder)
-                skipped += 1
+                record = store.record(stem) if store else read_record(folder)
+                differ = pipeline.options_differ(record, job.opts, job.model)
+                if not differ:
+                    log.info("skip %s: %s is complete", f, folder)
+                    skipped += 1
+                    continue
+                log.info("redo %s: %s was made with other %s", f, folder, ", ".join(differ))
+                changed[f] = differ
+                job.redo.add(f)
+                todo.append(f)
                 continue
             err(f"'{folder}' already exists (from '{f}'); use --force to replace it.")
             failed += 1
             continue
         todo.append(f)
+    if changed:
+        cli = {"fmt": "format", "ao": "no-ao", "preview": "no-preview"}
+        names = sorted({"--" + cli.get(k, k).replace("_", "-") for v in changed.values() for k in v})
+        log.warning("%d complete set%s in '%s' made with other options (%s): redoing %s", len(changed),
+                    "" if len(changed) == 1 else "s", job.output, ", ".join(names),
+                    "it" if len(changed) == 1 else "them")
     return todo, skipped, failed
+
+
+def read_record(folder):
+    """A set's ``material.json`` as a dict, or None when it cannot be read."""
+    import json
+
+    try:
+        with open(os.path.join(folder, pipeline.RECORD), encoding="utf-8") as fh:
+            data = json.load(fh)
+    except (OSError, ValueError):
+        return None
+    return data if isinstance(data, dict) else None
+
+
+def options_for(job, f):
+    """The options photo ``f`` runs with: the job's, replacing its set when it is redone."""
+    return dataclasses.replace(job.opts, force=True) if f in job.redo else job.opts
 
 
 def describe_failure(f, e):
@@ -150,11 +233,16 @@ def run_local(files, job, failures=None, report=None):
     from svbrdf_cli.infer.registry import load_model
 
     report = report or Report()
+    notes = {}  # photo -> its warnings, reported with its own line
 
     def err(msg):
         report.failed(msg)
         if failures is not None:
             failures.append(msg)
+
+    def tell_warnings(f):
+        for message in notes.pop(f, []):
+            report.warned(f, naming(f, message))
 
     todo, skipped, failed = plan_inputs(files, job, err)
     if not todo:
@@ -168,6 +256,7 @@ def run_local(files, job, failures=None, report=None):
     def report_failure(f, e):
         log.debug("details", exc_info=e)
         err(describe_failure(f, e))
+        tell_warnings(f)
 
     def finish(writing):
         """Wait for a set being written on the writer thread; report it (or its failure)."""
@@ -180,6 +269,7 @@ def run_local(files, job, failures=None, report=None):
         else:
             done += 1
             report.converted(f, folder, record, time.perf_counter() - t0)
+            tell_warnings(f)
         report.advanced()
 
     # Read and crop the next photo while the current one is in the networks, and write the previous
@@ -187,8 +277,11 @@ def run_local(files, job, failures=None, report=None):
     reader = concurrent.futures.ThreadPoolExecutor(max_workers=1)
     writer = concurrent.futures.ThreadPoolExecutor(max_workers=1)
     writing = None
+    def prepare(f):
+        return _collecting(notes.setdefault(f, []), pipeline.prepare, f, options_for(job, f))
+
     with reader, writer:
-        pending = reader.submit(pipeline.prepare, todo[0], job.opts)
+        pending = reader.submit(prepare, todo[0])
         for i, f in enumerate(todo):
             t0 = time.perf_counter()
             try:
@@ -197,12 +290,12 @@ def run_local(files, job, failures=None, report=None):
                 prepared = None
                 report_failure(f, e)
             if i + 1 < len(todo):
-                pending = reader.submit(pipeline.prepare, todo[i + 1], job.opts)
+                pending = reader.submit(prepare, todo[i + 1])
             write = None
             if prepared is not None:
                 try:
-                    write = pipeline.infer_set(prepared, chain, job.output, job.opts, model_name=job.model,
-                                               progress=report.refine_step)
+                    write = _collecting(notes.setdefault(f, []), pipeline.infer_set, prepared, chain, job.output,
+                                        options_for(job, f), model_name=job.model, progress=report.refine_step)
                 except Exception as e:  # noqa: BLE001
                     report_failure(f, e)
                 del prepared
@@ -210,7 +303,7 @@ def run_local(files, job, failures=None, report=None):
                 finish(writing)
                 writing = None
             if write is not None:
-                writing = (f, t0, writer.submit(write))
+                writing = (f, t0, writer.submit(_collecting, notes.setdefault(f, []), write))
             else:
                 report.advanced()
         if writing is not None:

@@ -51,8 +51,10 @@ log = logging.getLogger("svbrdf")
 
 #: Output sizes accepted by ``--size``.
 MIN_SIZE, MAX_SIZE = 256, 4096
-#: Default output size cap: the crop's own resolution, at most this.
+#: Default output size cap: the largest power of two within the crop's own resolution, at most this.
 DEFAULT_SIZE = 1024
+#: ``--size`` above the crop's side by more than this factor is upsampling the photo never had: warned.
+UPSAMPLE_SLACK = 1.02
 #: Marker that a set is complete (the batch command skips such folders).
 RECORD = "material.json"
 
@@ -64,7 +66,7 @@ class Options:
     preset: str = "svbrdf"
     crop: str = "auto"
     corners: tuple | None = None
-    size: int | None = None                    # None: the crop's resolution, capped at DEFAULT_SIZE
+    size: int | None = None                    # None: a power of two within the crop's side (output_size)
     exposure: float | None = None              # stops; None: auto exposure
     white_balance: tuple | None = None         # (r, g, b) multipliers
     upsample: str = "guided"                   # or "bicubic"
@@ -85,10 +87,38 @@ class Options:
 # --------------------------------------------------------------------------
 
 def output_size(opts, crop_side):
-    """The output maps' side: ``--size``, else the crop's side within [MIN_SIZE, DEFAULT_SIZE]."""
+    """The output maps' side: ``--size``, else the largest power of two within the crop's side, in
+    [MIN_SIZE, DEFAULT_SIZE] (engines and the glTF validator expect powers of two; a smaller one
+    than the crop rather than pixels the photo does not have)."""
     if opts.size is not None:
         return int(opts.size)
-    return int(min(DEFAULT_SIZE, max(MIN_SIZE, crop_side)))
+    side = min(DEFAULT_SIZE, max(MIN_SIZE, int(crop_side)))
+    return 1 << (side.bit_length() - 1)
+
+
+#: Options that do not change a set's files (how the run goes, not what it makes).
+_NOT_OUTPUT = ("force",)
+
+
+def output_options(opts, model):
+    """What a set's files depend on besides its photo and the tool: ``material.json`` records it under
+    ``options``, and a batch that resumes redoes a set recorded with other ones (:func:`options_differ`)."""
+    out = {k: v for k, v in dataclasses.asdict(opts).items() if k not in _NOT_OUTPUT}
+    return _jsonable({**out, "model": model})
+
+
+def options_differ(record, opts, model):
+    """The names of the output options in which the set's ``record`` (its ``material.json``) differs
+    from ``opts`` and ``model``. A record from before ``options`` was recorded is compared on what it
+    has (preset, bits, format, tileable, model)."""
+    want = output_options(opts, model)
+    record = record if isinstance(record, dict) else {}
+    had = record.get("options")
+    if not isinstance(had, dict):
+        legacy = {"preset": record.get("preset"), "bits": record.get("bits"), "fmt": record.get("format"),
+                  "tileable": record.get("tileable"), "model": (record.get("model") or {}).get("name")}
+        return sorted(k for k, v in legacy.items() if v is not None and v != want[k])
+    return sorted(k for k in want if had.get(k) != want[k])
 
 
 def output_folder(out_root, photo_path):
@@ -133,6 +163,11 @@ def prepare(path, opts):
                                 "use a larger region or a sharper photo.")
     small = resize(c.image, NETWORK_SIZE)
     plausible.check_crop(path, photo.linear, c.image)
+    side, have = output_size(opts, c.image.shape[0]), c.image.shape[0]
+    if side > UPSAMPLE_SLACK * have:
+        log.warning("'%s': --size %d upsamples the crop's %d px %.1fx, detail the photo does not have; use "
+                    "--size %d or less (%d: a power of two), or photograph closer", path, side, have, side / have,
+                    have, output_size(Options(), have))
     try:
         gain = opts.exposure if opts.exposure is not None else auto_exposure_gain(small)
     except SvbrdfError as e:
@@ -212,18 +247,20 @@ def infer_set(prepared, chain, out_root, opts, model_name="fast", progress=None)
     level = photo_level(p.gain_ev, manual=opts.exposure is not None)
     stored = to_photo_level(stored, level)
     maps = None  # linear maps, made only where needed (the native preset writes the stored ones)
+    tiling = None
     if opts.tileable:
         from svbrdf_cli.write.mapset import linear_to_stored
         from svbrdf_cli.write.tiling import make_tileable
 
-        maps = make_tileable(stored_to_linear(stored))
+        tiling = {}
+        maps = make_tileable(stored_to_linear(stored), report=tiling)
         stored = linear_to_stored(maps)
     t2 = time.perf_counter()
     timings["upsample"] = t2 - t_up
     timings["network"] = t1 - t0
-    conf = None
+    conf = conf_record = None
     if opts.confidence:
-        conf = confidence_maps(chain.used, net_in, {k: out[k] for k in cv.MAP_NAMES}, side)
+        conf, conf_record = _confidence(chain.used, net_in, {k: out[k] for k in cv.MAP_NAMES}, side)
         timings["confidence"] = time.perf_counter() - t2
 
     record = {
@@ -245,17 +282,34 @@ def infer_set(prepared, chain, out_root, opts, model_name="fast", progress=None)
         "network_size": NETWORK_SIZE, "size": side,
         "upsampling": upsampling,
         "preset": opts.preset, "bits": opts.bits, "format": opts.fmt, "tileable": opts.tileable,
+        "options": output_options(opts, model_name),
     }
+    if tiling is not None:
+        record["tiling"] = tiling
     if refined is not None:
         record.update(refined)
     if conf is not None:
-        from svbrdf_cli.infer import tta
-
-        record["confidence"] = {"passes": len(tta.CONFIDENCE_PASSES), "half_at_disagreement": tta.CONFIDENCE_HALF,
-                                "mean": {k: round(float(v.mean()), 4) for k, v in conf.items()}}
+        record["confidence"] = {**conf_record, "mean": {k: round(float(v.mean()), 4) for k, v in conf.items()}}
 
     # (the photo's path, not the Prepared: its decoded photo is not kept while the set is written)
     return functools.partial(_write_set, p.path, folder, opts, record, timings, stored, maps, net_in, out, conf)
+
+
+def _confidence(model, net_in, stored, side):
+    """``--confidence``: ({map: (side, side) confidence}, what ``material.json`` says of them). A network:
+    its rotated and mirrored passes' agreement (:mod:`svbrdf_cli.infer.tta`); the physical estimate:
+    what it read off the photo where (:mod:`svbrdf_cli.infer.physical_confidence`), for the maps it
+    measures only."""
+    from svbrdf_cli.infer import physical_confidence as pc, tta
+    from svbrdf_cli.infer.physical import NAME as PHYSICAL
+
+    if getattr(model, "tier", None) != PHYSICAL:
+        return (confidence_maps(model, net_in, stored, side),
+                {"method": "agreement of rotated and mirrored passes", "passes": len(tta.CONFIDENCE_PASSES),
+                 "half_at_disagreement": tta.CONFIDENCE_HALF})
+    conf = {k: np.clip(resize(v[..., None], side)[..., 0], 0, 1) for k, v in pc.confidence(net_in).items()}
+    return conf, {"method": "physical estimate: where the photo shows each map (svbrdf_cli.infer.physical_confidence)",
+                  "not_measured": pc.NOT_MEASURED}
 
 
 def _write_set(path, folder, opts, record, timings, stored, maps, net_in, out, conf):

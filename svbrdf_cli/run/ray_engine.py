@@ -20,6 +20,7 @@ checks.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import logging
 import os
 import shutil
@@ -28,7 +29,7 @@ import tempfile
 
 from svbrdf_cli.run import pipeline
 from svbrdf_cli.write.atomic import clean_partials
-from svbrdf_cli.run.batch import Counts, describe_failure, plan_inputs
+from svbrdf_cli.run.batch import Counts, collect_warnings, describe_failure, naming, plan_inputs, read_record
 from svbrdf_cli.errors import SvbrdfError
 from svbrdf_cli.infer.registry import check_model, load_model
 
@@ -89,6 +90,19 @@ class Store:
         """Whether the set ``stem`` is complete in the store."""
         return self._info(f"{stem}/{pipeline.RECORD}") if self.remote else pipeline.is_complete(os.path.join(self.output, stem))
 
+    def record(self, stem):
+        """The set ``stem``'s ``material.json`` as a dict, or None when it cannot be read."""
+        import json
+
+        if not self.remote:
+            return read_record(os.path.join(self.output, stem))
+        try:
+            with self.fs.open_input_stream(f"{self.root}/{stem}/{pipeline.RECORD}") as fh:
+                data = json.loads(fh.read())
+        except (OSError, ValueError):
+            return None
+        return data if isinstance(data, dict) else None
+
     def upload(self, local_folder, stem, force):
         """Copy a finished local set to ``<root>/<stem>/``, ``material.json`` last."""
         import pyarrow.fs as pafs
@@ -113,20 +127,27 @@ class Store:
 class CaptureWorker:
     """One Ray actor: a model chain loaded once, then photos one by one (``map_batches``)."""
 
-    def __init__(self, model, opts, output, threads=1):
+    def __init__(self, model, opts, output, threads=1, redo=()):
         self.chain = load_model(model, threads=threads)
-        self.model, self.opts, self.store = model, opts, Store(output)
+        self.model, self.opts, self.store, self.redo = model, opts, Store(output), frozenset(redo)
 
     def _one(self, path):
+        notes = []
+        with collect_warnings(notes):
+            row = self._convert(path)
+        return dict(row, warnings="\n".join(naming(path, m) for m in notes))
+
+    def _convert(self, path):
+        opts = dataclasses.replace(self.opts, force=True) if path in self.redo else self.opts
         try:
-            prepared = pipeline.prepare(path, self.opts)
+            prepared = pipeline.prepare(path, opts)
             if not self.store.remote:
-                folder, rec = pipeline.capture(prepared, self.chain, self.store.output, self.opts, model_name=self.model)
+                folder, rec = pipeline.capture(prepared, self.chain, self.store.output, opts, model_name=self.model)
                 return {"path": path, "folder": folder, "error": "", "seconds": sum(rec["timings_s"].values())}
             tmp = tempfile.mkdtemp(prefix="svbrdf-ray-")
             try:
-                local, rec = pipeline.capture(prepared, self.chain, tmp, self.opts, model_name=self.model)
-                folder = self.store.upload(local, os.path.basename(local), self.opts.force)
+                local, rec = pipeline.capture(prepared, self.chain, tmp, opts, model_name=self.model)
+                folder = self.store.upload(local, os.path.basename(local), opts.force)
             finally:
                 shutil.rmtree(tmp, ignore_errors=True)
             return {"path": path, "folder": folder, "error": "", "seconds": sum(rec["timings_s"].values())}
@@ -136,7 +157,7 @@ class CaptureWorker:
     def __call__(self, batch):
         """Convert one batch of photos on this worker; a row per photo (its set or its failure)."""
         rows = [self._one(str(p)) for p in batch["path"]]
-        return {k: [r[k] for r in rows] for k in ("path", "folder", "error", "seconds")}
+        return {k: [r[k] for r in rows] for k in ("path", "folder", "error", "seconds", "warnings")}
 
 
 @contextlib.contextmanager
@@ -199,7 +220,8 @@ def run_ray(files, job, address=None, workers=None, err=print):
         paths = [os.path.abspath(p) for p in todo]
         ds = ray.data.from_items([{"path": p} for p in paths], override_num_blocks=min(len(paths), 200))
         pool = ray.data.ActorPoolStrategy(min_size=1, max_size=workers, initial_size=min(workers, len(paths)))
-        ds = ds.map_batches(CaptureWorker, fn_constructor_args=(model, opts, output, threads_per_worker),
+        redo = [os.path.abspath(p) for p in todo if p in job.redo]
+        ds = ds.map_batches(CaptureWorker, fn_constructor_args=(model, opts, output, threads_per_worker, redo),
                             batch_size=1, compute=pool, num_cpus=threads_per_worker)
         rows = ds.take_all()
     finally:
@@ -219,4 +241,6 @@ def run_ray(files, job, address=None, workers=None, err=print):
             done += 1
             if not quiet:
                 log.info("%s -> %s (%.1f s)", original, r["folder"], r["seconds"])
+        for line in (r or {}).get("warnings", "").splitlines():  # (a worker's warnings, naming the photo)
+            log.warning("%s", line.replace(p, original))
     return Counts(done, skipped, failed)

@@ -1,9 +1,11 @@
-"""``index.html`` in a batch's output folder: one row per texture set, the failures with their reasons.
+"""``index.html`` in a batch's output folder: one card per texture set, the failures with their reasons.
 
 :func:`write_gallery` is called by ``svbrdf batch`` at the end of every run, so the page follows the
-folder as a batch resumes: it lists every complete set found there (its photo, its maps, its relit
-preview, its folder) and the inputs that failed in the latest run. The page is self-contained HTML
-and CSS referring to the sets' own files by relative paths: nothing is fetched from the network.
+folder as a batch resumes: it lists every complete set found there (its photo, its maps under plain
+names, its relit preview, a link to its folder and to its interactive viewer, which it writes beside
+any set that has none: :mod:`svbrdf_cli.write.viewer`) and the inputs that failed in the latest run.
+Each card's pictures wrap to the window's width, so nothing is cut off. The page is self-contained
+HTML and CSS referring to the sets' own files by relative paths: nothing is fetched from the network.
 
 The page carries :data:`svbrdf_cli.write.ownership.GENERATOR_META`: an ``index.html`` without it (the
 user's own page, or a folder of that name) is never replaced; the gallery is then not written, with
@@ -29,12 +31,27 @@ _VIEWABLE = (".png", ".jpg", ".jpeg", ".gif", ".webp")
 
 _STYLE = """
 body { font-family: system-ui, sans-serif; margin: 1.5em; background: #1e1e1e; color: #ddd; }
-h1 { font-size: 1.3em; } a { color: #8cf; }
-table { border-collapse: collapse; } td, th { padding: 6px; vertical-align: top; text-align: left; }
-tr { border-bottom: 1px solid #333; } img { width: 128px; height: 128px; object-fit: cover; display: block; }
-img.preview { width: auto; height: 128px; } .err { color: #f88; font-family: monospace; }
-figcaption { font-size: 0.75em; color: #999; }
+h1 { font-size: 1.3em; } h2 { font-size: 1.05em; margin: 0 0 6px 0; } a { color: #8cf; }
+.set { border-bottom: 1px solid #333; padding: 10px 0; }
+.set .info { font-size: 0.85em; color: #999; margin-left: 1em; }
+.maps { display: flex; flex-wrap: wrap; gap: 8px; } figure { margin: 0; }
+img { width: 128px; height: 128px; object-fit: cover; display: block; }
+img.preview { width: auto; max-width: 100%; height: 128px; } .err { color: #f88; font-family: monospace; }
+figcaption { font-size: 0.75em; color: #999; max-width: 128px; }
 """
+
+#: Plain names of the maps, by what their role in ``texture_set.json`` starts with (the first that matches).
+_LABELS = (("r = ambient occlusion", "packed: AO (R), roughness (G), metallic (B)"),
+           ("r = metallic", "mask map: metallic, AO, smoothness"),
+           ("base colour", "base colour"), ("diffuse", "diffuse colour"), ("specular", "specular (reflectance)"),
+           ("normal", "normal"), ("roughness", "roughness"), ("metallic", "metallic"), ("height", "height"),
+           ("ambient occlusion", "ambient occlusion"))
+
+
+def label(role, file):
+    """A map's plain name for the page, from its ``texture_set.json`` role (else the file's name)."""
+    r = role.strip().lower()
+    return next((name for start, name in _LABELS if r.startswith(start)), role or file)
 
 
 def _sets(out):
@@ -75,7 +92,7 @@ def _figure(src, caption, cls=""):
 
 def render(out, failures=()):
     """The gallery page of ``out`` as a string (``failures``: one-line reasons of the latest run)."""
-    rows = []
+    cards = []
     for name, record, texture_set in _sets(out):
         folder = os.path.join(out, name)
         cells = []
@@ -83,26 +100,41 @@ def render(out, failures=()):
         if photo and photo.lower().endswith(_VIEWABLE) and os.path.isfile(photo):
             cells.append(_figure(os.path.relpath(photo, out), "photo"))
         elif photo:
-            cells.append(f"<figcaption>{html.escape(os.path.basename(photo))}</figcaption>")
-        else:
-            cells.append("")
+            cells.append(f"<figure><figcaption>photo: {html.escape(os.path.basename(photo))}</figcaption></figure>")
         for file, role in _map_files(texture_set, folder):
-            cells.append(_figure(f"{name}/{file}", role or file))
+            cells.append(_figure(f"{name}/{file}", label(role, file)))
         if os.path.isfile(os.path.join(folder, "preview.png")):
-            cells.append(_figure(f"{name}/preview.png", "preview: maps and relit", "preview"))
+            cells.append(_figure(f"{name}/preview.png", "preview: the maps, and relit", "preview"))
         model = (record.get("model") or {}).get("tier", "")
-        viewer = (f'<br><a href="{html.escape(name)}/viewer.html">viewer</a>'
-                  if os.path.isfile(os.path.join(folder, "viewer.html")) else "")  # (svbrdf view SET)
-        head = (f'<a href="{html.escape(name)}/">{html.escape(name)}</a>{viewer}<br>'
-                f'<figcaption>{html.escape(str(model))} {html.escape(str(record.get("size", "")))}</figcaption>')
-        rows.append("<tr><th>" + head + "</th>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
+        size = record.get("size", "")
+        viewer = (f' &middot; <a href="{html.escape(name)}/viewer.html">open the viewer</a>'
+                  if os.path.isfile(os.path.join(folder, "viewer.html")) else "")
+        info = " ".join(str(x) for x in (model, f"{size} px" if size else "") if x)
+        cards.append(f'<div class="set"><h2><a href="{html.escape(name)}/">{html.escape(name)}</a>{viewer}'
+                     f'<span class="info">{html.escape(info)}</span></h2><div class="maps">' + "".join(cells)
+                     + "</div></div>")
     fails = "".join(f'<li class="err">{html.escape(f)}</li>' for f in failures)
-    return ("<!doctype html>\n<html><head><meta charset=\"utf-8\">" + ownership.GENERATOR_META + "<title>svbrdf: "
+    return ("<!doctype html>\n<html><head><meta charset=\"utf-8\">" + ownership.GENERATOR_META
+            + '<meta name="viewport" content="width=device-width, initial-scale=1"><title>svbrdf: '
             f"{html.escape(os.path.basename(os.path.abspath(out)))}</title><style>{_STYLE}</style></head><body>\n"
-            f"<h1>{len(rows)} texture set{'s' if len(rows) != 1 else ''} in "
+            f"<h1>{len(cards)} texture set{'s' if len(cards) != 1 else ''} in "
             f"{html.escape(os.path.abspath(out))}</h1>\n"
             + (f"<h2>Failed in the latest run</h2><ul>{fails}</ul>\n" if failures else "")
-            + "<table>\n" + "\n".join(rows) + "\n</table>\n</body></html>\n")
+            + "\n".join(cards) + "\n</body></html>\n")
+
+
+def _viewers(out):
+    """Write ``viewer.html`` beside every set of ``out`` that has none (one that cannot be read gets none)."""
+    from svbrdf_cli.errors import SvbrdfError
+    from svbrdf_cli.write.viewer import VIEWER, write_viewer
+
+    for name, _, _ in _sets(out):
+        folder = os.path.join(out, name)
+        if not os.path.lexists(os.path.join(folder, VIEWER)):
+            try:
+                write_viewer(folder)
+            except (SvbrdfError, OSError) as e:
+                log.info("no viewer for '%s': %s", folder, e)
 
 
 def write_gallery(out, failures=()):
@@ -115,6 +147,7 @@ def write_gallery(out, failures=()):
         log.warning("'%s' was not written by svbrdf: it is left as it is, and the gallery is not written. "
                     "Move it away to get one.", path)
         return None
+    _viewers(out)
     try:
         return write_text(path, render(out, failures))
     except OSError as e:

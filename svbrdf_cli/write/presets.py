@@ -355,7 +355,7 @@ def blender_prefix(folder, name=None):
     """File-name prefix for the Blender preset: ``name`` or the folder's, unless Node Wrangler would
     misread it."""
     raw = name or os.path.basename(os.path.abspath(os.fspath(folder)))
-    prefix = re.sub(r"[^A-Za-z0-9-]+", "-", raw).strip("-")
+    prefix = re.sub(r"[^A-Za-z0-9_-]+", "-", raw).strip("-_")  # (Node Wrangler splits at _ and - alike)
     if not prefix or set(name_components(prefix)) & _NODE_WRANGLER_TAGS:
         if prefix:
             log.warning("Blender preset: '%s' holds a texture tag Node Wrangler matches; "

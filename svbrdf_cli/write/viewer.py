@@ -1,4 +1,4 @@
-"""``svbrdf view SET``: a self-contained ``viewer.html`` beside a native texture set.
+"""``svbrdf view SET``: a self-contained ``viewer.html`` beside a texture set (native, or a preset's).
 
 The page shows the material on a plane under a point light that follows the mouse, rendered by a
 small hand-written WebGL shader with our conventions: the same Cook-Torrance (GGX, Smith-Schlick
@@ -7,8 +7,11 @@ with k = a/2, Schlick Fresnel, ``d (1 - s) / pi`` diffuse), the same geometry (t
 as :mod:`svbrdf_cli.shading`. The maps are embedded as data URIs (a browser will not hand a page
 opened from disk the pixels of sibling files), and nothing is fetched from the network. Toggles
 replace a map by a neutral one (flat normal, grey diffuse, roughness 0.5, F0 0.04); tiling repeats
-the maps 1-3 times; a slider scales the light. ``?light=x,y,z&intensity=I`` in the URL fixes the
-light (what the tests use).
+the maps 1-3 times; sliders set the light's intensity and height. The page has a title and says how
+to move the light; the canvas is the largest square the window leaves, redrawn when the window
+changes, at the screen's resolution up to ``size`` pixels. Without WebGL the page says so instead
+of showing a blank canvas. ``?light=x,y,z&intensity=I`` in the URL fixes the light, ``?bare``
+shows the canvas alone (for embedding; what the tests use).
 """
 
 from __future__ import annotations
@@ -18,10 +21,14 @@ import html
 import json
 import os
 
+import numpy as np
+
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.write import ownership
 from svbrdf_cli.write.atomic import write_text
-from svbrdf_cli.errors import ImageWriteError, MapSetError
+from svbrdf_cli.errors import ImageWriteError
+from svbrdf_cli.write.mapset import linear_to_stored
+from svbrdf_cli.write.readback import is_native, read_any_set
 
 #: The viewer's file name in the set's folder.
 VIEWER = "viewer.html"
@@ -62,13 +69,21 @@ void main() {
 """
 
 _PAGE = """<!doctype html>
-<html><head><meta charset="utf-8">%(generator)s<title>svbrdf viewer: %(name)s</title>
+<html><head><meta charset="utf-8">%(generator)s<meta name="viewport" content="width=device-width, initial-scale=1">
+<title>svbrdf viewer: %(name)s</title>
 <style>
-body { margin: 0; background: #1e1e1e; color: #ddd; font-family: system-ui, sans-serif; }
-#c { display: block; width: %(size)dpx; height: %(size)dpx; cursor: crosshair; }
-#ui { padding: 8px; font-size: 13px; } label { margin-right: 12px; }
+html, body { height: 100%%; }
+body { margin: 0; background: #1e1e1e; color: #ddd; font-family: system-ui, sans-serif; display: flex;
+       flex-direction: column; }
+header { padding: 8px 12px; background: #262626; font-size: 13px; }
+h1 { font-size: 16px; margin: 0 12px 0 0; display: inline; } .hint { color: #aaa; }
+#ui { margin-top: 6px; } label { margin-right: 12px; white-space: nowrap; }
+main { flex: 1; min-height: 0; display: flex; align-items: center; justify-content: center; }
+#c { display: block; cursor: crosshair; }
+#nogl { display: none; max-width: 36em; padding: 2em; line-height: 1.5; }
+body.bare header { display: none; }
 </style></head><body>
-<canvas id="c" width="%(size)d" height="%(size)d"></canvas>
+<header><h1>%(name)s</h1><span class="hint">Move the mouse over the material to move the light.</span>
 <div id="ui">
 <label><input type="checkbox" id="useN" checked> normal</label>
 <label><input type="checkbox" id="useD" checked> diffuse</label>
@@ -76,18 +91,38 @@ body { margin: 0; background: #1e1e1e; color: #ddd; font-family: system-ui, sans
 <label><input type="checkbox" id="useS" checked> specular</label>
 <label>tiling <select id="tile"><option>1</option><option>2</option><option>3</option></select></label>
 <label>light <input type="range" id="inten" min="-3" max="3" step="0.1" value="0"> stops</label>
-<label>height <input type="range" id="lz" min="0.3" max="4" step="0.05" value="%(cam_z)s"></label>
-</div>
+<label>light height <input type="range" id="lz" min="0.3" max="4" step="0.05" value="%(cam_z)s"></label>
+</div></header>
+<main><canvas id="c" width="%(size)d" height="%(size)d"></canvas>
+<div id="nogl"><b>This page needs WebGL to draw the material, and this browser has none</b> (it is turned
+off, or the graphics driver is blocked). Turn on hardware acceleration, or try another browser. The maps
+themselves are the PNG files beside this page.</div>
+<noscript><div style="padding: 2em">This page needs JavaScript (and WebGL) to draw the material.</div></noscript></main>
 <script>
 "use strict";
 var MAPS = %(maps)s;
-var CAM = %(cam)s, INTENSITY = %(intensity)s, HALF = %(half)s;
+var CAM = %(cam)s, INTENSITY = %(intensity)s, HALF = %(half)s, MAX_SIDE = %(size)d;
 var params = new URLSearchParams(location.search);
+if (params.has("bare")) document.body.className = "bare";  // the canvas alone (embedding; the tests)
 var light = CAM.slice();
 if (params.get("light")) light = params.get("light").split(",").map(Number);
 var scale = params.get("intensity") ? Number(params.get("intensity")) / INTENSITY : 1.0;
 var canvas = document.getElementById("c");
-var gl = canvas.getContext("webgl", {preserveDrawingBuffer: true});
+var gl = null;
+try { gl = canvas.getContext("webgl", {preserveDrawingBuffer: true}); } catch (e) { gl = null; }
+function val(id) { return document.getElementById(id); }
+function fit() {
+  // the largest square the window leaves below the header; drawn at the screen's resolution (at most MAX_SIDE)
+  var main = document.querySelector("main");
+  var side = Math.max(64, Math.floor(Math.min(main.clientWidth, main.clientHeight)));
+  canvas.style.width = side + "px"; canvas.style.height = side + "px";
+  var px = Math.min(MAX_SIDE, Math.round(side * (window.devicePixelRatio || 1)));
+  if (canvas.width !== px) { canvas.width = px; canvas.height = px; }
+}
+if (!gl) {
+  canvas.style.display = "none"; val("ui").style.display = "none"; val("nogl").style.display = "block";
+  document.title = "svbrdf viewer: no WebGL";
+} else {
 function shader(type, src) {
   var s = gl.createShader(type); gl.shaderSource(s, src); gl.compileShader(s);
   if (!gl.getShaderParameter(s, gl.COMPILE_STATUS)) throw new Error(gl.getShaderInfoLog(s));
@@ -119,8 +154,9 @@ keys.forEach(function (k, i) {
   };
   img.src = MAPS[k];
 });
-function val(id) { return document.getElementById(id); }
-function draw() {
+var draw = function () {
+  if (pending > 0) return;
+  fit();
   gl.uniform3fv(gl.getUniformLocation(prog, "uLight"), light);
   gl.uniform3fv(gl.getUniformLocation(prog, "uCam"), CAM);
   gl.uniform1f(gl.getUniformLocation(prog, "uI"), INTENSITY * scale * Math.pow(2, Number(val("inten").value)));
@@ -130,7 +166,9 @@ function draw() {
   gl.viewport(0, 0, canvas.width, canvas.height);
   gl.drawArrays(gl.TRIANGLE_STRIP, 0, 4);
   document.title = "svbrdf viewer: drawn";
-}
+};
+fit();
+window.addEventListener("resize", draw);
 canvas.addEventListener("mousemove", function (e) {
   var r = canvas.getBoundingClientRect();
   light = [((e.clientX - r.left) / r.width * 2 - 1) * HALF, (1 - (e.clientY - r.top) / r.height * 2) * HALF,
@@ -140,6 +178,7 @@ canvas.addEventListener("mousemove", function (e) {
 ["useN", "useD", "useR", "useS", "tile", "inten", "lz"].forEach(function (id) {
   val(id).addEventListener("input", function () { if (id === "lz") light[2] = Number(val("lz").value); draw(); });
 });
+}
 </script></body></html>
 """
 
@@ -149,15 +188,26 @@ def _data_uri(path):
         return "data:image/png;base64," + base64.b64encode(f.read()).decode("ascii")
 
 
-def page(folder, size=512):
-    """The viewer's HTML for the native set in ``folder``."""
-    maps = {}
-    for k in cv.MAP_NAMES:
-        path = os.path.join(folder, f"{k}.png")
-        if not os.path.isfile(path):
-            raise MapSetError(f"'{folder}' has no {k}.png; 'svbrdf view' shows a native set "
-                              "(svbrdf capture's default preset).")
-        maps[k] = _data_uri(path)
+def _png_uri(pixels):
+    """An (H, W, 3) image in [0, 1] as an 8-bit PNG data URI."""
+    import cv2
+
+    x = (np.clip(np.asarray(pixels, np.float32), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+    ok, buf = cv2.imencode(".png", np.ascontiguousarray(x[..., ::-1]))
+    return "data:image/png;base64," + base64.b64encode(buf.tobytes()).decode("ascii")
+
+
+def _maps(folder):
+    """{map: data URI} of a native set's files, or of a preset's set read back and stored in our encoding."""
+    if is_native(folder):
+        return {k: _data_uri(os.path.join(folder, f"{k}.png")) for k in cv.MAP_NAMES}
+    stored = linear_to_stored(read_any_set(folder))
+    return {k: _png_uri(stored[k][..., :3]) for k in cv.MAP_NAMES}
+
+
+def page(folder, size=2048):
+    """The viewer's HTML for the set in ``folder`` (native, or a preset's: :mod:`svbrdf_cli.write.readback`)."""
+    maps = _maps(folder)
     fragment = _FRAGMENT % {"eps": f"{cv.EPS:.8f}",
                             "albedo_gamma": f"{cv.ALBEDO_GAMMA:.4f}", "image_gamma": f"{cv.IMAGE_GAMMA:.4f}",
                             "f0": f"{cv.DIELECTRIC_F0:.4f}", "half": f"{cv.SURFACE_HALF_SIZE:.4f}"}
@@ -168,7 +218,7 @@ def page(folder, size=512):
                     "fragment": json.dumps(fragment)}
 
 
-def write_viewer(folder, size=512):
+def write_viewer(folder, size=2048):
     """Write ``folder/viewer.html`` (atomically); returns its path. A ``viewer.html`` svbrdf did not write
     is never replaced."""
     path = os.path.join(folder, VIEWER)

@@ -139,7 +139,7 @@ def test_a_batch_logged_to_a_file_is_one_line_per_photo(tmp_path):
     assert "\r" not in r.stderr
     lines = r.stderr.splitlines()
     assert sum(" -> " in line for line in lines) == 4 and lines[-1] == "4 done"
-    assert all(line.startswith(("WARNING:", "INFO:")) or " -> " in line or line == "4 done" for line in lines), lines
+    assert all(line.startswith(("WARNING:", "warning:", "INFO:")) or " -> " in line or line == "4 done" for line in lines), lines
 
 
 def test_batch_writes_a_gallery_of_every_set_and_the_failures(tmp_path):
@@ -156,10 +156,62 @@ def test_batch_writes_a_gallery_of_every_set_and_the_failures(tmp_path):
     for name in ("oak", "slate"):
         assert f'src="{name}/T_{name}_BC.png"' in page and f'src="{name}/preview.png"' in page
     assert 'src="../in/oak.png"' in page  # the photo, by a relative path
-    assert "viewer.html" not in page
-    # resumed: the broken photo removed, the page lists the same sets and no failure (and oak's viewer)
+    for name in ("oak", "slate"):  # each set's viewer, written beside it (an unreal set: read back)
+        assert f'href="{name}/viewer.html"' in page and (out / name / "viewer.html").is_file()
+    # plain labels, not the files' roles
+    assert "base colour" in page and "packed: AO (R), roughness (G), metallic (B)" in page and "R = " not in page
+    # resumed: the broken photo removed, the page lists the same sets and no failure; a viewer is not rewritten
     (d / "broken.jpg").unlink()
-    (out / "oak" / "viewer.html").write_text("<html></html>")
+    (out / "oak" / "viewer.html").unlink()
+    (out / "oak" / "viewer.html").write_text("<html>the user's own</html>")
     assert run("batch", d, "-o", out, "--preset", "unreal", "--size", 256)[0] == 0
     page = (out / "index.html").read_text()
     assert "2 texture sets" in page and "broken.jpg" not in page and 'href="oak/viewer.html"' in page
+    assert (out / "oak" / "viewer.html").read_text() == "<html>the user's own</html>"
+
+
+def test_the_gallery_labels_native_maps_plainly_and_wraps_to_the_window(tmp_path):
+    from .test_view import BROWSER, _shot
+
+    d = tmp_path / "in"
+    d.mkdir()
+    make_photo(d / "oak.png", seed=1)
+    out = tmp_path / "out"
+    assert run("batch", d, "-o", out, "--size", 256)[0] == 0
+    page = (out / "index.html").read_text()
+    assert "stored^2.2" not in page and "diffuse colour" in page and "specular (reflectance)" in page
+    if BROWSER is None:
+        pytest.skip("no Chromium (apt-get install chromium; .ci/run installs it)")
+    for width in (800, 1600):
+        shot = _shot(f"file://{out / 'index.html'}", tmp_path / f"g{width}.png", width, 700)
+        ink = np.abs(shot - shot[5, 5]).max(-1) > 0.08
+        # nothing runs into the window's right edge (the old table was cut off there: its preview column)
+        assert not ink[:, width - 12:].any(), width
+        assert ink[:, width // 2:].any() or width > 1200  # the page is not empty on the right at 800
+
+
+def test_resume_redoes_sets_made_with_other_options_and_keeps_the_users_files(tmp_path):
+    d = tmp_path / "in"
+    d.mkdir()
+    for i in range(2):
+        make_photo(d / f"p{i}.png", 300, 400, seed=i)
+    out = tmp_path / "out"
+    base = ["batch", d, "-o", out, "--size", 256, "--no-preview", "--refine", 0]
+    code, text = run(*base)
+    assert code == 0 and text.strip().endswith("2 done"), text
+    (out / "p0" / "notes.txt").write_text("mine")  # the user's file inside a set
+    code, text = run(*base)
+    assert code == 0 and "2 already done" in text, text
+    before = (out / "p1" / "material.json").read_text()
+    # the same batch for Unreal at another size: every set is redone (it was reported "already done")
+    code, text = run("batch", d, "-o", out, "--size", 512, "--no-preview", "--refine", 0, "--preset", "unreal")
+    assert code == 0 and text.strip().endswith("2 done") and "already done" not in text, text
+    assert "made with other options (--preset, --size)" in text, text
+    for i in range(2):
+        rec = json.loads((out / f"p{i}" / "material.json").read_text())
+        assert rec["options"]["preset"] == "unreal" and rec["size"] == 512
+        assert (out / f"p{i}" / f"T_p{i}_BC.png").is_file() and not (out / f"p{i}" / "diffuse.png").exists()
+    assert (out / "p0" / "notes.txt").read_text() == "mine"
+    assert (out / "p1" / "material.json").read_text() != before
+    code, text = run("batch", d, "-o", out, "--size", 512, "--no-preview", "--refine", 0, "--preset", "unreal")
+    assert code == 0 and "2 already done" in text, text

@@ -8,7 +8,7 @@ import pytest
 
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.imageio import read_image
-from svbrdf_cli.infer.chain import installed_tiers
+from svbrdf_cli.infer.chain import TIERS, installed_tiers
 from svbrdf_cli.infer.registry import DEFAULT_MODEL
 
 from .clitools import SAMPLE, make_photo, run
@@ -80,8 +80,21 @@ def test_usage_errors_exit_2(tmp_path):
     assert run("capture", SAMPLE, "-o", tmp_path, "--size", 100)[0] == 2       # size out of range
     assert run("capture", SAMPLE, "-o", tmp_path, "--corners", "1,2,3")[0] == 2
     assert run("capture", SAMPLE, "-o", tmp_path, "--preset", "svbrdf", "--format", "exr")[0] == 2
-    code, out = run("capture", SAMPLE, "-o", tmp_path, "--model", "best")
-    assert code == 1 and "not installed" in out
+
+
+@pytest.mark.parametrize("command", ["capture", "batch"])
+def test_model_help_lists_installed_models_and_others_are_usage_errors(tmp_path, command):
+    code, out = run(command, "--help")
+    assert code == 0
+    help_text = " ".join(out.split())
+    for tier in TIERS:
+        assert (tier in help_text) == (tier in installed_tiers()), tier
+    src = SAMPLE if command == "capture" else os.path.dirname(SAMPLE)
+    for name in [t for t in TIERS if t not in installed_tiers()] + ["nope", str(tmp_path / "no_such_folder")]:
+        code, out = run(command, src, "-o", tmp_path / "o", "--model", name)
+        assert code == 2, (name, out)
+        assert f"default ({DEFAULT_MODEL})" in out and "lite" not in out.split("default")[-1], out
+    assert not (tmp_path / "o").exists()
 
 
 def test_missing_file_is_one_failure_not_a_crash(tmp_path):
@@ -187,3 +200,42 @@ def test_the_physical_estimate_runs_at_the_output_size(tmp_path):
     assert code == 0, out
     assert json.loads((tmp_path / "f" / "plaster" / "material.json").read_text())["upsampling"] == "guided"
 
+
+
+def test_default_sizes_are_powers_of_two_and_upsampling_is_warned(tmp_path):
+    from svbrdf_cli.imageio import write_image
+
+    photo = tmp_path / "wall.png"  # a 700 x 520 photo: a 520 px crop
+    rng = np.random.default_rng(0)
+    write_image(photo, (0.3 + 0.2 * rng.random((520, 700, 3))).astype(np.float32))
+    code, out = run("capture", photo, "-o", tmp_path / "o", "--no-preview", "--refine", 0)
+    assert code == 0, out
+    assert json.loads((tmp_path / "o" / "wall" / "material.json").read_text())["size"] == 512
+    assert read_image(tmp_path / "o" / "wall" / "diffuse.png").shape[:2] == (512, 512)
+    assert "upsample" not in out
+    code, out = run("capture", photo, "-o", tmp_path / "big", "--no-preview", "--refine", 0, "--size", 2048)
+    assert code == 0, out
+    warned = [ln for ln in out.splitlines() if ln.startswith("warning:")]
+    assert len(warned) == 1 and f"'{photo}'" in warned[0] and "upsamples the crop's 520 px 3.9x" in warned[0], out
+
+
+def test_confidence_of_the_default_model_says_where_the_photo_shows_the_maps(tmp_path):
+    code, out = run("capture", SAMPLE, "-o", tmp_path, "--size", 256, "--confidence", "--no-preview")
+    assert code == 0, out
+    folder = tmp_path / "glazed_tiles"
+    rec = json.loads((folder / "material.json").read_text())
+    # the physical estimate measures the diffuse and roughness; it assumes the normal and specular
+    assert sorted(os.listdir(folder / "confidence")) == ["diffuse.png", "roughness.png"]
+    assert sorted(rec["confidence"]["not_measured"]) == ["normal", "specular"]
+    c = read_image(folder / "confidence" / "diffuse.png")
+    c = c[..., 0] if c.ndim == 3 else c
+    assert c.min() < 0.05 and c.max() > 0.95  # not all white (it was: every pixel 255)
+    # lowest under the flash (its highlight clipped there: the diffuse was filled in), high away from it
+    yy, xx = np.mgrid[0:256, 0:256]
+    r = np.hypot(xx - 128, yy - 128)
+    assert c[r < 12].mean() < 0.2 < 0.8 < c[(r > 90) & (r < 110)].mean()
+    rough = read_image(folder / "confidence" / "roughness.png")
+    rough = rough[..., 0] if rough.ndim == 3 else rough
+    assert rough[(r > 40) & (r < 60)].mean() > rough[r > 120].mean() + 0.3  # where the highlight showed
+    code, out = run("capture", "--help")
+    assert "Runs the networks 5 times" not in out and "assumed normal and specular" in " ".join(out.split())

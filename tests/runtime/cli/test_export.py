@@ -3,10 +3,11 @@
 import os
 
 import numpy as np
+import pytest
 
 from svbrdf_cli import conventions as cv
-from svbrdf_cli.write import mapset
 from svbrdf_cli.imageio import read_image
+from svbrdf_cli.write import mapset, readback
 
 from .clitools import run
 
@@ -32,9 +33,9 @@ def test_cli_export(tmp_path):
     args = ["export", str(tmp_path / "maps"), "-o", str(out), "--preset", "unreal", "--bits", "16", "--no-ao"]
     code, output = run(*args)
     assert code == 0, output
-    orm = read_image(out / "T_ue_ORM.png")
+    orm = read_image(out / "T_maps_ORM.png")
     np.testing.assert_allclose(right(orm), [1.0, 0.7, 1.0], atol=2e-3)
-    assert read_image(out / "T_ue_N.png")[..., 1].max() < 0.4
+    assert read_image(out / "T_maps_N.png")[..., 1].max() < 0.4
 
     code, output = run(*args)
     assert code == 1
@@ -86,3 +87,47 @@ def test_height_is_the_relief_at_a_fixed_scale_and_flat_normals_are_flat(tmp_pat
     want = (h - h.mean()) / 2.0
     assert np.corrcoef(got.ravel(), want.ravel())[0, 1] > 0.98
     assert abs(np.ptp(got) / np.ptp(want) - 1) < 0.1
+
+
+def test_export_names_files_after_the_material_not_the_output_folder(tmp_path):
+    mapset.write_map_set(tmp_path / "oak", _maps(), bits=16)
+    code, output = run("export", tmp_path / "oak", "-o", tmp_path / "exp" / "oak_ue", "--preset", "unreal")
+    assert code == 0, output
+    assert "T_oak_BC.png" in os.listdir(tmp_path / "exp" / "oak_ue")  # not T_oak_ue_BC.png
+    # the Blender preset keeps the name as it is (Node Wrangler splits at _ and - alike)
+    mapset.write_map_set(tmp_path / "wood_walnut", _maps(), bits=16)
+    code, output = run("export", tmp_path / "wood_walnut", "-o", tmp_path / "b", "--preset", "blender")
+    assert code == 0, output
+    assert "wood_walnut_BaseColor.png" in os.listdir(tmp_path / "b")
+
+
+@pytest.mark.parametrize("preset", ["gltf", "unreal", "unity-hdrp", "blender"])
+def test_view_render_and_export_accept_a_presets_set(tmp_path, preset):
+    maps = _maps()
+    mapset.write_map_set(tmp_path / "oak", maps, bits=16)
+    code, output = run("export", tmp_path / "oak", "-o", tmp_path / preset, "--preset", preset, "--bits", 16)
+    assert code == 0, output
+    # read back: the same maps (16-bit rounding aside)
+    back = readback.read_any_set(tmp_path / preset)
+    for k in ("diffuse", "specular", "roughness"):
+        np.testing.assert_allclose(back[k][..., :maps[k].shape[-1] if maps[k].ndim == 3 else 1],
+                                   maps[k] if maps[k].ndim == 3 else maps[k][..., None], atol=0.01, err_msg=k)
+    np.testing.assert_allclose(back["normal"], maps["normal"], atol=0.01)
+    code, output = run("render", tmp_path / preset, "-o", tmp_path / "relit.png", "--force")
+    assert code == 0, output
+    code, output = run("render", tmp_path / "oak", "-o", tmp_path / "relit_native.png")
+    assert code == 0, output
+    assert np.abs(read_image(tmp_path / "relit.png") - read_image(tmp_path / "relit_native.png")).max() < 0.02
+    code, output = run("view", tmp_path / preset, "--no-open")
+    assert code == 0 and (tmp_path / preset / "viewer.html").is_file(), output
+    code, output = run("export", tmp_path / preset, "-o", tmp_path / "again", "--preset", "svbrdf", "--force")
+    assert code == 0, output
+
+
+def test_a_folder_that_is_no_set_is_refused_naming_what_is_accepted(tmp_path):
+    (tmp_path / "photos").mkdir()
+    (tmp_path / "photos" / "a.txt").write_text("x")
+    for args in (["view", tmp_path / "photos", "--no-open"], ["render", tmp_path / "photos", "-o", tmp_path / "r.png"],
+                 ["export", tmp_path / "photos", "-o", tmp_path / "e", "--preset", "gltf"]):
+        code, output = run(*args)
+        assert code == 1 and "native set" in output and "--preset gltf, unreal, unity-hdrp or blender" in output, output

@@ -36,16 +36,21 @@ def test_view_writes_a_self_contained_page(tmp_path):
     assert oct(os.stat(folder / "viewer.html").st_mode & 0o777) != "0o600"
     (tmp_path / "other").mkdir()
     code, out = run("view", tmp_path / "other", "--no-open")
-    assert code == 1 and "normal.png" in out
+    assert code == 1 and "normal.png" in out and "native set" in out
+
+
+def _shot(url, out, width, height, webgl=True):
+    gl = (["--use-gl=angle", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"] if webgl
+          else ["--disable-webgl", "--disable-3d-apis"])
+    subprocess.run([BROWSER, "--headless", "--no-sandbox", "--disable-gpu", *gl, "--hide-scrollbars",
+                    f"--window-size={width},{height}", "--virtual-time-budget=5000", f"--screenshot={out}", url],
+                   check=True, capture_output=True, timeout=120)
+    return read_image(out)[:height, :width, :3]
 
 
 def _screenshot(page, light, out, size=256):
-    subprocess.run([BROWSER, "--headless", "--no-sandbox", "--disable-gpu", "--use-gl=angle", "--use-angle=swiftshader",
-                    "--enable-unsafe-swiftshader", "--hide-scrollbars", f"--window-size={size},{size}",
-                    "--virtual-time-budget=5000", f"--screenshot={out}",
-                    f"file://{page}?light={','.join(map(str, light))}"],
-                   check=True, capture_output=True, timeout=120)
-    return read_image(out)[:size, :size, :3]
+    """The canvas alone (``?bare``) filling a square window."""
+    return _shot(f"file://{page}?bare&light={','.join(map(str, light))}", out, size, size)
 
 
 @pytest.mark.skipif(BROWSER is None, reason="no Chromium (apt-get install chromium; .ci/run installs it)")
@@ -67,3 +72,29 @@ def test_the_viewer_renders_like_the_numpy_renderer(tmp_path):
         peaks.append(np.unravel_index(np.argmax(lum), lum.shape))
     (r0, c0), (r1, c1) = peaks
     assert c0 > 128 > c1 and r0 < 128 < r1  # the highlight follows the light: up-right, then down-left
+
+
+@pytest.mark.skipif(BROWSER is None, reason="no Chromium (apt-get install chromium; .ci/run installs it)")
+def test_the_viewer_has_a_title_a_hint_and_fills_the_window(tmp_path):
+    folder = _set(tmp_path / "oak")
+    assert run("view", folder, "--no-open")[0] == 0
+    page = (folder / "viewer.html").read_text()
+    assert "<h1>oak</h1>" in page and "Move the mouse over the material to move the light." in page
+    for w, h in ((900, 700), (700, 900)):
+        shot = _shot(f"file://{folder / 'viewer.html'}", tmp_path / f"page{w}.png", w, h)
+        lit = np.abs(shot - shot[-1, -1]).max(-1) > 0.05  # not the page's background (its corner)
+        rows, cols = np.nonzero(lit[h // 3:])  # below the header
+        # the canvas is the largest square the window leaves (not a fixed 512 px square at the top left)
+        side = min(w, h - 80)
+        assert cols.max() - cols.min() > 0.85 * side and abs((cols.max() + cols.min()) / 2 - w / 2) < 0.05 * w, (w, h)
+        assert rows.max() + h // 3 > h - 0.1 * h, (w, h)
+
+
+@pytest.mark.skipif(BROWSER is None, reason="no Chromium (apt-get install chromium; .ci/run installs it)")
+def test_without_webgl_the_viewer_says_so(tmp_path):
+    folder = _set(tmp_path / "oak")
+    assert run("view", folder, "--no-open")[0] == 0
+    shot = _shot(f"file://{folder / 'viewer.html'}", tmp_path / "nogl.png", 800, 600, webgl=False)
+    text = shot[120:, :].max(-1) > 0.6  # light text below the header, on the dark page
+    assert text.mean() > 0.002, "a blank page without WebGL"
+    assert "needs WebGL" in (folder / "viewer.html").read_text()

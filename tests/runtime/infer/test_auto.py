@@ -104,7 +104,9 @@ def test_capture_with_model_auto_records_the_tier_and_why(tmp_path):
     else:
         assert m["sha256_16"]["maps.onnx"] and os.path.isdir(m["folder"])
     assert any(k.startswith("network_") for k in rec["timings_s"])
-    assert os.path.isfile(tmp_path / "out" / "stone" / "confidence" / "normal.png")
+    # the chosen model's confidence: a network's for every map, the physical estimate's for what it measures
+    maps = ("diffuse", "roughness") if m["tier"] == auto_tier.PHYSICAL else ("normal", "diffuse", "roughness", "specular")
+    assert sorted(os.listdir(tmp_path / "out" / "stone" / "confidence")) == sorted(f"{k}.png" for k in maps)
 
 
 @pytest.mark.parametrize("threshold,chosen", [(None, 0), (-1.0, 1)])

@@ -398,7 +398,7 @@ def _(t):
     return _capture("p.jpg", "--model", "bad_model")
 
 
-@case("model_unknown", 1, "nonesuch")
+@case("model_unknown", 2, "nonesuch")  # a usage error
 def _(t):
     jpeg(t / "p.jpg", flash_photo())
     return _capture("p.jpg", "--model", "nonesuch")

@@ -3,9 +3,13 @@
 from svbrdf_cli.run import pipeline
 
 
-def test_output_size_defaults_to_the_crop_capped():
+def test_output_size_defaults_to_a_power_of_two_within_the_crop_capped():
     assert pipeline.output_size(pipeline.Options(), 3000) == pipeline.DEFAULT_SIZE
-    assert pipeline.output_size(pipeline.Options(), 300) == 300
+    assert pipeline.output_size(pipeline.Options(), 300) == 256
+    assert pipeline.output_size(pipeline.Options(), 768) == 512
+    assert pipeline.output_size(pipeline.Options(), 781) == 512
+    assert pipeline.output_size(pipeline.Options(), 1023) == 512
+    assert pipeline.output_size(pipeline.Options(), 1024) == 1024
     assert pipeline.output_size(pipeline.Options(), 100) == pipeline.MIN_SIZE
     assert pipeline.output_size(pipeline.Options(size=2048), 300) == 2048
 

@@ -281,7 +281,8 @@ def test_blender_layout_and_node_wrangler_names(maps, tmp_path):
 
 
 def test_blender_prefix_avoids_node_wrangler_tags(tmp_path):
-    assert presets.blender_prefix(tmp_path / "oak_planks") == "oak-planks"
+    assert presets.blender_prefix(tmp_path / "oak_planks") == "oak_planks"  # the name kept
+    assert presets.blender_prefix(tmp_path / "oak planks (2)") == "oak-planks-2"
     assert presets.blender_prefix(tmp_path / "RustyMetal") == "material"
     assert presets.blender_prefix(tmp_path / "tile_2k_rough") == "material"
 
