@@ -28,6 +28,7 @@ import sys
 import tempfile
 
 from svbrdf_cli.run import pipeline
+from svbrdf_cli.write import ownership
 from svbrdf_cli.write.atomic import clean_partials
 from svbrdf_cli.run.batch import Counts, collect_warnings, describe_failure, naming, plan_inputs, read_record
 from svbrdf_cli.errors import SvbrdfError
@@ -103,17 +104,24 @@ class Store:
             return None
         return data if isinstance(data, dict) else None
 
-    def upload(self, local_folder, stem, force):
-        """Copy a finished local set to ``<root>/<stem>/``, ``material.json`` last."""
+    def upload(self, local_folder, stem):
+        """Copy a finished local set to ``<root>/<stem>/``, its manifest first and ``material.json``
+        last. A set already there loses only the files svbrdf wrote and nobody changed since (its
+        manifest); a file of the new set that would replace anything else is refused."""
         import pyarrow.fs as pafs
 
         dest = f"{self.root}/{stem}"
-        if force and self._info(stem):
-            self.fs.delete_dir(dest)
-        self.fs.create_dir(dest, recursive=True)
         files = sorted(os.path.relpath(os.path.join(d, n), local_folder)
                        for d, _, names in os.walk(local_folder) for n in names)
-        files.sort(key=lambda rel: rel == pipeline.RECORD)  # the completion marker goes last
+        if self._info(stem):  # (a set the plan redoes: --force, other options, or an interrupted upload)
+            kept = self._remove_ours(dest)
+            clash = sorted(set(kept) & {rel.replace(os.sep, "/") for rel in files})
+            if clash:
+                raise SvbrdfError(f"'{self.output.rstrip('/')}/{stem}' holds {', '.join(clash[:3])}, which svbrdf did "
+                                  "not write (or which changed since); move them away, or write elsewhere with -o.")
+        self.fs.create_dir(dest, recursive=True)
+        # the manifest first (an interrupted upload is still known as ours), the completion marker last
+        files.sort(key=lambda rel: (rel != ownership.MANIFEST, rel == pipeline.RECORD))
         local = pafs.LocalFileSystem()
         for rel in files:
             target = f"{dest}/{rel.replace(os.sep, '/')}"
@@ -122,6 +130,43 @@ class Store:
             pafs.copy_files(os.path.join(local_folder, rel), target, source_filesystem=local,
                             destination_filesystem=self.fs)
         return f"{self.output.rstrip('/')}/{stem}"
+
+
+    def _files(self, dest):
+        """Relative ``/``-separated paths of the files below ``dest`` in the store."""
+        import pyarrow.fs as pafs
+
+        infos = self.fs.get_file_info(pafs.FileSelector(dest, recursive=True))
+        return [i.path[len(dest) + 1:] for i in infos if i.type == pafs.FileType.File]
+
+    def _read(self, path, limit=None):
+        with self.fs.open_input_stream(path) as fh:
+            return fh.read(limit) if limit else fh.read()
+
+    def _json(self, path):
+        import json
+
+        try:
+            data = json.loads(self._read(path, 16 << 20).decode("utf-8"))
+        except (OSError, ValueError):
+            return None
+        return data if isinstance(data, dict) else None
+
+    def _remove_ours(self, dest):
+        """Delete the files of the set at ``dest`` that svbrdf wrote and that are as it wrote them (its
+        manifest, :mod:`svbrdf_cli.write.ownership`); returns the files left, which are not ours."""
+        import hashlib
+
+        ours = ownership.manifest_of(self._json(f"{dest}/{ownership.MANIFEST}"),
+                                     self._json(f"{dest}/{ownership.RECORD}")) or {}
+        left = []
+        for rel in self._files(dest):
+            digest = ours.get(rel, False)
+            if digest is not False and (digest is None or hashlib.sha256(self._read(f"{dest}/{rel}")).hexdigest() == digest):
+                self.fs.delete_file(f"{dest}/{rel}")
+            else:
+                left.append(rel)
+        return left
 
 
 class CaptureWorker:
@@ -147,7 +192,7 @@ class CaptureWorker:
             tmp = tempfile.mkdtemp(prefix="svbrdf-ray-")
             try:
                 local, rec = pipeline.capture(prepared, self.chain, tmp, opts, model_name=self.model)
-                folder = self.store.upload(local, os.path.basename(local), opts.force)
+                folder = self.store.upload(local, os.path.basename(local))
             finally:
                 shutil.rmtree(tmp, ignore_errors=True)
             return {"path": path, "folder": folder, "error": "", "seconds": sum(rec["timings_s"].values())}

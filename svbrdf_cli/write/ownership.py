@@ -111,7 +111,12 @@ def read_manifest(folder):
     ``folder``, or None when ``folder`` is not a texture set svbrdf wrote (or is a link)."""
     if os.path.islink(folder) or not os.path.isdir(folder):
         return None
-    meta = read_json(os.path.join(folder, MANIFEST))
+    return manifest_of(read_json(os.path.join(folder, MANIFEST)), read_json(os.path.join(folder, RECORD)))
+
+
+def manifest_of(meta, record):
+    """:func:`read_manifest` from a set's :data:`MANIFEST` and :data:`RECORD` contents (dicts or None),
+    wherever they were read from (a folder, an object store)."""
     entry = meta.get(MANIFEST_KEY) if meta else None
     if isinstance(entry, dict) and entry.get("tool") == TOOL and isinstance(entry.get("files"), dict):
         files = {safe_name(n): h if isinstance(h, str) else None for n, h in entry["files"].items()}
@@ -121,7 +126,6 @@ def read_manifest(folder):
     files = set()
     if meta and str(meta.get("generator", "")).startswith(TOOL + " ") and isinstance(meta.get("files"), dict):
         files |= set(meta["files"]) | {MANIFEST}
-    record = read_json(os.path.join(folder, RECORD))
     if record and str(record.get("tool", "")).startswith(TOOL + " ") and isinstance(record.get("files"), list):
         files |= {n for n in record["files"] if isinstance(n, str)} | {RECORD}
     found = {safe_name(n): None for n in files}
