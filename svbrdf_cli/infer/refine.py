@@ -20,8 +20,9 @@ diffuse alone could copy the photo exactly, so the priors decide how the residua
 * **smoothness of roughness and specular** (squared differences of neighbours): a highlight is
   explained by a smooth lobe, not by painting its disc into the maps;
 * **a dielectric prior**: specular's luminance is pulled towards :data:`svbrdf_cli.conventions.DIELECTRIC_F0`,
-  and its change is grey plus at most the diffuse's own colour (:func:`_spec_change`: a metal looks
-  its colour; no other tint is added to explain a white highlight over a coloured diffuse), and
+  and its change is grey plus at most the diffuse's own colour, that only where the pixel is a metal by
+  F0's level or by the photo's highlight colour (:func:`_spec_change`: a metal looks its colour; no other
+  tint is added to explain a white highlight over a coloured diffuse), and
   the map's mean luminance never goes under that dielectric F0 (:data:`SPECULAR_FLOOR`): the photo
   may shape it from pixel to pixel but not lower the whole map;
 * **normals near the up direction** unless the photo needs them tilted;
@@ -47,6 +48,7 @@ from svbrdf_cli import conventions as cv
 from svbrdf_cli import imageops
 from svbrdf_cli.imageops import luminance
 from svbrdf_cli import shading
+from svbrdf_cli.rectify import highlight
 
 #: Iterations of ``--refine`` given without a number (and of ``svbrdf capture`` without ``--refine``):
 #: 60 steps fit as well as 150, within 0.3 % on every measure of ``docs/capture.md``'s table, in 40 %
@@ -254,24 +256,30 @@ def _tint(diffuse_log):
     return (d / np.maximum(d.mean(-1, keepdims=True), 1e-4)).astype(np.float32)
 
 
-def _spec_change(change, tint, level):
+def _spec_change(change, tint, level, own=None):
     """Project a change of F0 onto ``a * grey + b * tint`` with ``b >= 0`` (per pixel, least squares): F0 may
     rise or fall, and take on the diffuse's own colour (a metal's look), but no other colour: not the
-    blue that would whiten a highlight over brown wood, nor the photo's texture. The colour only where
-    F0's ``level`` (the start's plus this change's, luminance) is a metal's: a dielectric's change is
-    grey (:func:`svbrdf_cli.conventions.metal_weight`; a dielectric's highlight is the flash's white,
-    and a wood's F0 tinted by its diffuse renders pink highlights and reads as metal)."""
+    blue that would whiten a highlight over brown wood, nor the photo's texture.
+
+    How much of the diffuse's colour is bounded by how far the pixel is a metal: ``b`` is at most that
+    share of F0's ``level`` (the start's plus this change's, luminance), the share being F0's level read
+    as a metal's (:func:`svbrdf_cli.conventions.metal_weight`) or ``own`` (H, W), the share of the photo's
+    highlight in the material's colour (:func:`svbrdf_cli.rectify.highlight.metal_share`), whichever is
+    more. A dielectric's highlight is the flash's white, so its F0 changes in grey (a wood's F0 tinted by
+    its diffuse renders pink highlights and reads as metal); a foil whose highlight the photo shows in
+    its own colour may take that colour even at a dielectric's level."""
     one = np.ones_like(tint)
     g11, g12, g22 = 3.0, tint.sum(-1, keepdims=True), (tint * tint).sum(-1, keepdims=True)
     r1, r2 = change.sum(-1, keepdims=True), (change * tint).sum(-1, keepdims=True)
     det = g11 * g22 - g12 * g12
     ok = det > 1e-6  # a grey diffuse has no tint of its own
     b = np.where(ok, (g11 * r2 - g12 * r1) / np.where(ok, det, 1.0), 0.0)
-    b = np.maximum(b, 0.0)
+    metal = cv.metal_weight(level)
+    if own is not None:
+        metal = np.maximum(metal, own)
+    b = np.clip(b, 0.0, (metal * np.maximum(level, 0.0))[..., None])
     a = (r1 - b * g12) / g11
-    metal = cv.metal_weight(level)[..., None].astype(np.float32)
-    grey = r1 / g11
-    return (metal * (a * one + b * tint) + (1.0 - metal) * grey * one).astype(np.float32)
+    return (a * one + b * tint).astype(np.float32)
 
 
 def _radial(side, centre, rings=RADIAL_RINGS):
@@ -392,6 +400,7 @@ def refine(image, stored, geometry, iterations=DEFAULT_ITERATIONS, priors=None, 
     start = parameters({k: np.asarray(v, np.float32) for k, v in stored.items()})
     weight = _unclipped(photo)  # (once: the intensity's fit and the full-size problem share it)
     intensity = fit_intensity(photo, start, geometry, weight)
+    own = highlight.metal_share(image, geometry.light[2])[..., None]  # the photo's coloured highlights
     full = _Problem(photo, start, geometry, intensity, priors, side, weight)
     loss_before = full.photo_loss(start)
     delta = None
@@ -408,6 +417,7 @@ def refine(image, stored, geometry, iterations=DEFAULT_ITERATIONS, priors=None, 
         delta = {k: np.zeros_like(v) for k, v in init.items()} if delta is None else \
             {k: _at(v, s) for k, v in delta.items()}
         tint = _tint(init["diffuse"])
+        own_s = _at(own, s)[..., 0]
         radial = _radial(s, geometry.highlight[:2])
         m1 = {k: np.zeros_like(v) for k, v in delta.items()}
         m2 = {k: np.zeros_like(v) for k, v in delta.items()}
@@ -425,7 +435,7 @@ def refine(image, stored, geometry, iterations=DEFAULT_ITERATIONS, priors=None, 
                 step = STEP[k] * (m1[k] / (1 - 0.9 ** i)) / (np.sqrt(m2[k] / (1 - 0.999 ** i)) + 1e-12)
                 delta[k] = (delta[k] - step).astype(np.float32)
             delta["specular"] = _spec_change(delta["specular"], tint,
-                                             luminance(init["specular"] + delta["specular"]))
+                                             luminance(init["specular"] + delta["specular"]), own_s)
             for k in RADIAL_FREE:
                 delta[k] = _without_radial_trend(delta[k], radial)
             delta["tilt"] = _without_radial_tilt(delta["tilt"], radial, geometry.highlight[:2])

@@ -39,16 +39,18 @@ def test_the_sample_albedo_is_at_the_photos_own_level(tmp_path):
     assert abs(np.median(one[ok] / np.maximum(zero[ok], 1e-4)) - 2.0) < 0.15
 
 
-def _walnut_photo(path, side=384, seed=3):
-    """A flash photo of a brown, finely grained, glossy dielectric: the highlight clips in the middle."""
+def _walnut_photo(path, side=384, seed=3, colour=(0.30, 0.13, 0.05), f0=(0.04, 0.04, 0.04), roughness=0.25):
+    """A flash photo of a brown, finely grained, glossy dielectric: the highlight clips in the middle
+    (``colour``, ``f0``, ``roughness``: another material)."""
     from svbrdf_cli.shading import render_maps
 
     rng = np.random.default_rng(seed)
     grain = blur(rng.normal(0.0, 1.0, (side, side)).astype(np.float32), 1.0)
     grain = grain / grain.std()
-    albedo = np.array([0.30, 0.13, 0.05], np.float32) * (1.0 + 0.25 * grain)[..., None]
+    albedo = np.array(colour, np.float32) * (1.0 + 0.25 * grain)[..., None]
     maps = {"normal": np.tile(np.float32([0, 0, 1]), (side, side, 1)), "diffuse": albedo.astype(np.float32),
-            "roughness": np.full((side, side, 1), 0.25, np.float32), "specular": np.full((side, side, 3), 0.04, np.float32)}
+            "roughness": np.full((side, side, 1), roughness, np.float32),
+            "specular": np.broadcast_to(np.float32(f0), (side, side, 3)).copy()}
     lin = render_maps(maps, light=cv.FLASH_POSITION, intensity=cv.LIGHT_INTENSITY * 1.6)
     write_image(path, cv.linear_to_srgb(np.clip(lin, 0.0, 1.0)).astype(np.float32))
     return path, grain
@@ -78,3 +80,30 @@ def test_no_flash_hole_and_no_false_metal(tmp_path):
     assert code == 0, out
     spec = cv.albedo_to_linear(read_image(tmp_path / "n" / "walnut" / "specular.png"))
     assert np.abs(spec - spec.mean(-1, keepdims=True)).max() < 0.005
+
+
+def _chroma(folder):
+    spec = cv.albedo_to_linear(read_image(folder / "specular.png"))
+    return spec, float((spec.max(-1) - spec.min(-1)).mean())
+
+
+def test_a_foil_whose_highlight_is_its_colour_keeps_a_coloured_specular(tmp_path):
+    # a gold foil at a dielectric's F0 level (0.06): its highlight is gold in the photo, not white, so
+    # --refine lets its F0 take the colour (the card_blue_9lights foil scales relight better so); the
+    # walnut beside it, the same level and a white highlight, stays grey
+    gold = np.float32([1.0, 0.72, 0.25])
+    f0 = 0.06 * gold / luminance(gold[None])[0]
+    foil, _ = _walnut_photo(tmp_path / "foil.png", colour=0.12 * gold, f0=f0, roughness=0.3)
+    walnut, _ = _walnut_photo(tmp_path / "walnut.png")
+    for photo in (foil, walnut):
+        code, out = run("capture", photo, "-o", tmp_path / "o", "--no-preview")
+        assert code == 0, out
+    spec, chroma = _chroma(tmp_path / "o" / "foil")
+    red, _, blue = spec.mean((0, 1))
+    assert chroma > 0.006 and red > blue + 0.006, (chroma, spec.mean((0, 1)))  # gold: red over blue
+    _, chroma = _chroma(tmp_path / "o" / "walnut")
+    assert chroma < 0.002, chroma
+    # the glTF set of the foil has no metal: its F0 is a dielectric's level, whatever its colour
+    code, out = run("capture", foil, "-o", tmp_path / "g", "--preset", "gltf", "--no-preview")
+    assert code == 0, out
+    assert read_image(tmp_path / "g" / "foil" / "metallicRoughness.png")[..., 2].max() == 0.0

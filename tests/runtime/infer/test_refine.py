@@ -213,6 +213,19 @@ def test_a_dielectrics_specular_change_is_grey():
     assert np.ptp(out) < 1e-7 and abs(float(out.mean()) - 0.02) < 1e-7
 
 
+def test_a_coloured_highlight_lets_a_dielectric_level_f0_take_its_colour():
+    # where the photo's highlight is the material's own colour (own: highlight.metal_share), F0 may follow
+    # the diffuse's tint at a dielectric's level, up to that share of its level
+    brown = np.array([[[1.5, 1.0, 0.5]]], np.float32)
+    gold = np.array([[[0.03, 0.02, 0.01]]], np.float32)
+    level = np.array([[0.06]], np.float32)
+    assert np.allclose(refine._spec_change(gold, brown, level, np.array([[1.0]], np.float32)), gold, atol=1e-7)
+    out = refine._spec_change(3 * gold, brown, level, np.array([[0.5]], np.float32))
+    assert np.allclose(out, 0.03 + 0.03 * brown, atol=1e-7)  # the tint bounded at 0.5 x 0.06, the rest grey
+    none = refine._spec_change(gold, brown, level, np.array([[0.0]], np.float32))
+    assert np.ptp(none) < 1e-7
+
+
 def test_the_specular_maps_mean_never_falls_under_a_dielectrics_f0(monkeypatch):
     # a photo whose highlight is weaker than the start's F0 = 0.04 explains: the fit lowers F0
     light = (0.1, 0.0, 2.4)
