@@ -71,11 +71,17 @@ DIELECTRIC_MAX_F0 = 0.08
 METAL_MIN_F0 = 0.16
 
 
+def smoothstep(x, lo, hi, dtype=np.float64):
+    """0 for ``x`` up to ``lo``, 1 from ``hi``, the cubic 3t^2 - 2t^3 between (no edge at either end),
+    computed in ``dtype`` (None: ``x``'s own)."""
+    t = np.clip((np.asarray(x, dtype) - lo) / (hi - lo), 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
 def metal_weight(f0_level):
     """0 for an F0 level (brightness) up to :data:`DIELECTRIC_MAX_F0`, 1 from :data:`METAL_MIN_F0`, a
     smoothstep between (no edge where the level crosses a line)."""
-    t = np.clip((np.asarray(f0_level) - DIELECTRIC_MAX_F0) / (METAL_MIN_F0 - DIELECTRIC_MAX_F0), 0.0, 1.0)
-    return t * t * (3.0 - 2.0 * t)
+    return smoothstep(f0_level, DIELECTRIC_MAX_F0, METAL_MIN_F0, dtype=None)
 
 #: Smallest roughness the renderer evaluates. alpha = r^2 would reach 0 and
 #: make GGX a Dirac delta; this keeps r = 0 finite (alpha = 1e-4).

@@ -484,6 +484,36 @@ def _residue_spot(img, diffuse):
     return cv2.resize(spot.astype(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST).astype(bool)
 
 
+@dataclasses.dataclass
+class FlashFit:
+    """The flash as a photo shows it (:func:`fit_flash`): the linear photo and its luminance, the foot of
+    the flash, each pixel's distance from it (surface units) and the highlight lobe fitted there."""
+
+    lin: np.ndarray
+    lum: np.ndarray
+    foot: tuple
+    rho: np.ndarray
+    fit: object
+
+
+def fit_flash(image, geo=None):
+    """Where the flash was and the highlight it made, from the encoded (H, W, 3) ``image`` (what the
+    estimate, its confidence and the trained chain's flash context start from)."""
+    geo = geo or Geometry()
+    img = np.asarray(image, np.float32)
+    lin = cv.image_to_linear(img).astype(np.float32)
+    lum = luminance(lin)
+    x, y = surface_grid(*img.shape[:2])
+    foot = geo.foot if geo.foot is not None else flash_foot(lum, x, y)
+    rho = np.sqrt((x - foot[0]) ** 2 + (y - foot[1]) ** 2)
+    # The lobe fit leaves out only what clipped at the camera's white: a plateau the exposure moved down
+    # stays in it as a lower bound. Measured, leaving it out too broadens the fitted lobe on real
+    # data: Des19 as svbrdf capture exposes it, roughness 0.2038 against 0.1905; +2 EV clipped 0.2655
+    # against 0.2119; card_blue relight 0.151 against 0.146 (on a constructed photo it would help).
+    fit = fit_lobe(lum, (img >= CLIPPED).any(-1), rho, geo)
+    return FlashFit(lin, lum, foot, rho, fit)
+
+
 def estimate(image, geo=None, with_fit=False):
     """The physical estimate of one photo.
 
@@ -500,18 +530,10 @@ def estimate(image, geo=None, with_fit=False):
     geo = geo or Geometry()
     img = np.asarray(image, np.float32)
     h, w = img.shape[:2]
-    lin = cv.image_to_linear(img).astype(np.float32)
     level = cv.clip_level(img)  # a clipped highlight darkened by the exposure is clipped all the same
     clipped = (img >= CLIPPED * level).any(-1)
-    lum = luminance(lin)
-    x, y = surface_grid(h, w)
-    foot = geo.foot if geo.foot is not None else flash_foot(lum, x, y)
-    rho = np.sqrt((x - foot[0]) ** 2 + (y - foot[1]) ** 2)
-    # The lobe fit leaves out only what clipped at the camera's white: a plateau the exposure moved down
-    # stays in it as a lower bound. Measured, leaving it out too broadens the fitted lobe on real
-    # data: Des19 as svbrdf capture exposes it, roughness 0.2038 against 0.1905; +2 EV clipped 0.2655
-    # against 0.2119; card_blue relight 0.151 against 0.146 (on a constructed photo it would help).
-    fit = fit_lobe(lum, (img >= CLIPPED).any(-1), rho, geo)
+    flash = fit_flash(img, geo)
+    lin, lum, foot, rho, fit = flash.lin, flash.lum, flash.foot, flash.rho, flash.fit
     shading, d = shading_at(rho, fit.height, geo.height)
     spec = lobe(d, fit.height, fit.roughness).astype(np.float32) * (fit.height / geo.height) ** 2
     spec_rad = fit.specular * spec  # luminance of the lobe

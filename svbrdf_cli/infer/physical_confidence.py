@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from svbrdf_cli import conventions as cv
-from svbrdf_cli.imageops import blur, luminance
+from svbrdf_cli.imageops import blur
 from svbrdf_cli.infer import physical
 
 #: Maps the physical estimate measures (and gets a confidence for), and those it assumes.
@@ -45,22 +45,13 @@ SEEN_RAMP = (0.02, 0.2)
 BROAD_RAMP = (0.5, 0.9)
 
 
-def _ramp(x, lo, hi):
-    t = np.clip((np.asarray(x, np.float64) - lo) / (hi - lo), 0.0, 1.0)
-    return t * t * (3.0 - 2.0 * t)
-
-
 def confidence(image, geometry=None):
     """{map: (H, W) float32 in [0, 1]} for :data:`MEASURED` maps of the encoded (H, W, 3) ``image``."""
     geo = geometry or physical.Geometry()
     img = np.asarray(image, np.float32)
     h, w = img.shape[:2]
-    lin = cv.image_to_linear(img).astype(np.float32)
-    lum = luminance(lin)
-    x, y = physical.surface_grid(h, w)
-    foot = geo.foot if geo.foot is not None else physical.flash_foot(lum, x, y)
-    rho = np.sqrt((x - foot[0]) ** 2 + (y - foot[1]) ** 2)
-    fit = physical.fit_lobe(lum, (img >= physical.CLIPPED).any(-1), rho, geo)
+    flash = physical.fit_flash(img, geo)
+    rho, fit = flash.rho, flash.fit
     shading, d = physical.shading_at(rho, fit.height, geo.height)
     lobe = physical.lobe(d, fit.height, fit.roughness) * (fit.height / geo.height) ** 2 * fit.specular
     share = lobe / np.maximum(fit.diffuse * shading + lobe, 1e-12)
@@ -70,10 +61,10 @@ def confidence(image, geometry=None):
     step = physical.HEIGHT_GRID[3] / physical.HEIGHT_GRID[2]
     other, _ = physical.shading_at(rho, fit.height * step, geo.height)
     change = np.abs(np.log(np.maximum(other, 1e-12) / np.maximum(shading, 1e-12)))
-    diffuse = ((1.0 - near_clip) * (1.0 - _ramp(share, *SHARE_RAMP)) * _ramp(img.mean(-1), *SIGNAL_RAMP)
+    diffuse = ((1.0 - near_clip) * (1.0 - cv.smoothstep(share, *SHARE_RAMP)) * cv.smoothstep(img.mean(-1), *SIGNAL_RAMP)
                / (1.0 + (change / FALLOFF_HALF) ** 2))
     # roughness
-    sure = float(np.clip(fit.gain, 0.0, 1.0)) * float(1.0 - _ramp(fit.roughness, *BROAD_RAMP))
-    seen = _ramp(share, *SEEN_RAMP) * sure if fit.specular > 0 else np.zeros((h, w))
+    sure = float(np.clip(fit.gain, 0.0, 1.0)) * float(1.0 - cv.smoothstep(fit.roughness, *BROAD_RAMP))
+    seen = cv.smoothstep(share, *SEEN_RAMP) * sure if fit.specular > 0 else np.zeros((h, w))
     return {"diffuse": np.clip(diffuse, 0, 1).astype(np.float32),
             "roughness": np.clip(seen * (1.0 - near_clip), 0, 1).astype(np.float32)}

@@ -7,7 +7,7 @@ and ``maps`` (stored encoding, the correction of the base already applied). Its 
 training run's provenance.
 
 Where the flash was comes from the physical estimate's fit of the photo (the foot of the flash and
-its height, :func:`svbrdf_cli.infer.physical.estimate`), as the training's flash context comes from
+its height, :func:`svbrdf_cli.infer.physical.fit_flash`), as the training's flash context comes from
 the true flash moved by the error such a fit makes (``export/engine/batches.py``).
 """
 
@@ -72,7 +72,9 @@ class SwiftModel:
         """The flash position (3,) in surface units, from the physical estimate's fit of ``image``."""
         from svbrdf_cli.infer import physical
 
-        _, self.found = physical.estimate(image)
+        fit = physical.fit_flash(image)
+        self.found = {"flash_foot": [round(fit.foot[0], 4), round(fit.foot[1], 4)],
+                      "flash_height": round(fit.fit.height, 4)}
         foot = self.found["flash_foot"]
         return np.array([foot[0], foot[1], self.found["flash_height"]], np.float64)
 

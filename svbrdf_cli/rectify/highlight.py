@@ -86,11 +86,6 @@ def _hue(lin):
     return np.arctan2(np.sqrt(3.0) * (lin[..., 1] - lin[..., 2]), 2.0 * lin[..., 0] - lin[..., 1] - lin[..., 2])
 
 
-def _smoothstep(x, edges):
-    t = np.clip((np.asarray(x, np.float64) - edges[0]) / (edges[1] - edges[0]), 0.0, 1.0)
-    return t * t * (3.0 - 2.0 * t)
-
-
 def metal_share(image, height, valid=None):
     """(H, W) in [0, 1]: how far each pixel's material reflects the flash in its own colour (a metal's
     highlight), read from the photo's flash spot, per hue.
@@ -154,8 +149,8 @@ def metal_share(image, height, valid=None):
         if ws.sum() <= 0:
             continue
         share = 1.0 - float((s_white * ws).sum()) / float((s * ws).sum())
-        evidence = _smoothstep(float((would * ms).sum() / ms.sum()), WHITENING_EVIDENCE)
-        trust = 1.0 - _smoothstep(w_far, COLOURED_WHITENESS)
-        got += m * float(_smoothstep(share, METAL_SHARE) * evidence * trust)
+        evidence = cv.smoothstep(float((would * ms).sum() / ms.sum()), *WHITENING_EVIDENCE)
+        trust = 1.0 - cv.smoothstep(w_far, *COLOURED_WHITENESS)
+        got += m * float(cv.smoothstep(share, *METAL_SHARE) * evidence * trust)
     out[:] = got / np.maximum(total, 1e-9)
     return out

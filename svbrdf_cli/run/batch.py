@@ -21,6 +21,7 @@ import time
 from typing import NamedTuple
 
 from svbrdf_cli.run import pipeline
+from svbrdf_cli.write import ownership
 from svbrdf_cli.write.atomic import clean_partials
 from svbrdf_cli.errors import SvbrdfError
 from svbrdf_cli.infer.registry import DEFAULT_MODEL
@@ -201,19 +202,12 @@ def plan_inputs(files, job, err, store=None):
 
 def read_record(folder):
     """A set's ``material.json`` as a dict, or None when it cannot be read."""
-    import json
-
-    try:
-        with open(os.path.join(folder, pipeline.RECORD), encoding="utf-8") as fh:
-            data = json.load(fh)
-    except (OSError, ValueError):
-        return None
-    return data if isinstance(data, dict) else None
+    return ownership.read_json(os.path.join(folder, pipeline.RECORD))
 
 
-def options_for(job, f):
-    """The options photo ``f`` runs with: the job's, replacing its set when it is redone."""
-    return dataclasses.replace(job.opts, force=True) if f in job.redo else job.opts
+def options_for(opts, redo, f):
+    """The options photo ``f`` runs with: ``opts``, replacing its set when it is one of ``redo``."""
+    return dataclasses.replace(opts, force=True) if f in redo else opts
 
 
 def describe_failure(f, e):
@@ -277,8 +271,9 @@ def run_local(files, job, failures=None, report=None):
     reader = concurrent.futures.ThreadPoolExecutor(max_workers=1)
     writer = concurrent.futures.ThreadPoolExecutor(max_workers=1)
     writing = None
+
     def prepare(f):
-        return _collecting(notes.setdefault(f, []), pipeline.prepare, f, options_for(job, f))
+        return _collecting(notes.setdefault(f, []), pipeline.prepare, f, options_for(job.opts, job.redo, f))
 
     with reader, writer:
         pending = reader.submit(prepare, todo[0])
@@ -295,7 +290,7 @@ def run_local(files, job, failures=None, report=None):
             if prepared is not None:
                 try:
                     write = _collecting(notes.setdefault(f, []), pipeline.infer_set, prepared, chain, job.output,
-                                        options_for(job, f), model_name=job.model, progress=report.refine_step)
+                                        options_for(job.opts, job.redo, f), model_name=job.model, progress=report.refine_step)
                 except Exception as e:  # noqa: BLE001
                     report_failure(f, e)
                 del prepared

@@ -20,7 +20,6 @@ checks.
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import logging
 import os
 import shutil
@@ -30,7 +29,8 @@ import tempfile
 from svbrdf_cli.run import pipeline
 from svbrdf_cli.write import ownership
 from svbrdf_cli.write.atomic import clean_partials
-from svbrdf_cli.run.batch import Counts, collect_warnings, describe_failure, naming, plan_inputs, read_record
+from svbrdf_cli.run.batch import (Counts, collect_warnings, describe_failure, naming, options_for, plan_inputs,
+                                  read_record)
 from svbrdf_cli.errors import SvbrdfError
 from svbrdf_cli.infer.registry import check_model, load_model
 
@@ -93,16 +93,9 @@ class Store:
 
     def record(self, stem):
         """The set ``stem``'s ``material.json`` as a dict, or None when it cannot be read."""
-        import json
-
         if not self.remote:
             return read_record(os.path.join(self.output, stem))
-        try:
-            with self.fs.open_input_stream(f"{self.root}/{stem}/{pipeline.RECORD}") as fh:
-                data = json.loads(fh.read())
-        except (OSError, ValueError):
-            return None
-        return data if isinstance(data, dict) else None
+        return self._json(f"{self.root}/{stem}/{pipeline.RECORD}")
 
     def upload(self, local_folder, stem):
         """Copy a finished local set to ``<root>/<stem>/``, its manifest first and ``material.json``
@@ -130,7 +123,6 @@ class Store:
             pafs.copy_files(os.path.join(local_folder, rel), target, source_filesystem=local,
                             destination_filesystem=self.fs)
         return f"{self.output.rstrip('/')}/{stem}"
-
 
     def _files(self, dest):
         """Relative ``/``-separated paths of the files below ``dest`` in the store."""
@@ -183,7 +175,7 @@ class CaptureWorker:
         return dict(row, warnings="\n".join(naming(path, m) for m in notes))
 
     def _convert(self, path):
-        opts = dataclasses.replace(self.opts, force=True) if path in self.redo else self.opts
+        opts = options_for(self.opts, self.redo, path)
         try:
             prepared = pipeline.prepare(path, opts)
             if not self.store.remote:

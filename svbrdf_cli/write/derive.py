@@ -15,12 +15,6 @@ from svbrdf_cli import conventions as cv
 #: KHR_materials_pbrSpecularGlossiness conversion sample.
 _BRIGHTNESS_WEIGHTS = (0.299, 0.587, 0.114)
 
-#: Specular brightness up to this is a dielectric's, whatever its tint (and a dielectric whose F0
-#: took on some of its diffuse's colour); the metallic solution is faded in up to METAL_MIN
-#: (:func:`svbrdf_cli.conventions.metal_weight`).
-DIELECTRIC_MAX = cv.DIELECTRIC_MAX_F0
-METAL_MIN = cv.METAL_MIN_F0
-
 #: Smallest |n_z| used when turning normals into slopes (slope <= 20).
 _MIN_NZ = 0.05
 
@@ -64,10 +58,10 @@ def specular_to_metallic(diffuse, specular):
     reflect alike, and just above S = F0 the quadratic's larger root over a
     dark diffuse is large (diffuse 0.02 with F0 0.045 solves to m = 0.58).
     So a specular in the dielectric range (brightness up to
-    :data:`DIELECTRIC_MAX`, any tint) is a dielectric, m = 0, and the root is
-    faded in up to :data:`METAL_MIN` (a smoothstep of the brightness).
+    :data:`svbrdf_cli.conventions.DIELECTRIC_MAX_F0`, any tint) is a dielectric, m = 0, and the root is
+    faded in up to :data:`svbrdf_cli.conventions.METAL_MIN_F0` (:func:`svbrdf_cli.conventions.metal_weight`).
     Pure dielectrics (specular = F0) and metals brighter than
-    :data:`METAL_MIN` (diffuse = 0) round-trip exactly through
+    :data:`svbrdf_cli.conventions.METAL_MIN_F0` (diffuse = 0) round-trip exactly through
     ``diffuse = base (1 - m), specular = lerp(F0, base, m)``.
 
     Args:

@@ -15,7 +15,6 @@ a warning.
 from __future__ import annotations
 
 import html
-import json
 import logging
 import os
 
@@ -65,11 +64,7 @@ def _sets(out):
         for marker in SET_MARKERS:
             path = os.path.join(folder, marker)
             if os.path.isfile(path):
-                try:
-                    with open(path) as f:
-                        meta[marker] = json.load(f)
-                except (OSError, ValueError):
-                    meta[marker] = {}
+                meta[marker] = ownership.read_json(path) or {}
         if meta:
             found.append((name, meta.get("material.json", {}), meta.get("texture_set.json", {})))
     return found
@@ -90,10 +85,11 @@ def _figure(src, caption, cls=""):
             f'alt="{html.escape(caption)}"></a><figcaption>{html.escape(caption)}</figcaption></figure>')
 
 
-def render(out, failures=()):
-    """The gallery page of ``out`` as a string (``failures``: one-line reasons of the latest run)."""
+def render(out, failures=(), sets=None):
+    """The gallery page of ``out`` as a string (``failures``: one-line reasons of the latest run;
+    ``sets``: what :func:`_sets` finds there, when the caller has it)."""
     cards = []
-    for name, record, texture_set in _sets(out):
+    for name, record, texture_set in _sets(out) if sets is None else sets:
         folder = os.path.join(out, name)
         cells = []
         photo = (record.get("input") or {}).get("file")
@@ -123,12 +119,13 @@ def render(out, failures=()):
             + "\n".join(cards) + "\n</body></html>\n")
 
 
-def _viewers(out):
-    """Write ``viewer.html`` beside every set of ``out`` that has none (one that cannot be read gets none)."""
+def _viewers(out, sets):
+    """Write ``viewer.html`` beside every set of ``out`` (``sets``, as :func:`_sets` finds them) that has
+    none (one that cannot be read gets none)."""
     from svbrdf_cli.errors import SvbrdfError
     from svbrdf_cli.write.viewer import VIEWER, write_viewer
 
-    for name, _, _ in _sets(out):
+    for name, _, _ in sets:
         folder = os.path.join(out, name)
         if not os.path.lexists(os.path.join(folder, VIEWER)):
             try:
@@ -147,9 +144,10 @@ def write_gallery(out, failures=()):
         log.warning("'%s' was not written by svbrdf: it is left as it is, and the gallery is not written. "
                     "Move it away to get one.", path)
         return None
-    _viewers(out)
+    sets = _sets(out)
+    _viewers(out, sets)
     try:
-        return write_text(path, render(out, failures))
+        return write_text(path, render(out, failures, sets))
     except OSError as e:
         log.warning("Could not write the gallery '%s': %s.", path, e.strerror or e)
         return None

@@ -15,7 +15,6 @@ Anything else is refused with a message naming what is accepted.
 
 from __future__ import annotations
 
-import json
 import os
 import re
 
@@ -24,6 +23,7 @@ import numpy as np
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.errors import MapSetError
 from svbrdf_cli.imageio import read_image
+from svbrdf_cli.write import ownership
 from svbrdf_cli.write.mapset import read_map_set
 
 #: What the commands that read a set accept, for their messages.
@@ -96,13 +96,8 @@ def read_any_set(folder):
     folder = os.fspath(folder)
     if is_native(folder):
         return read_map_set(folder)
-    meta_path = os.path.join(folder, "texture_set.json")
-    try:
-        with open(meta_path, encoding="utf-8") as f:
-            meta = json.load(f)
-    except (OSError, ValueError):
-        meta = None
-    if not isinstance(meta, dict) or meta.get("preset") in (None, "svbrdf"):
+    meta = ownership.read_json(os.path.join(folder, "texture_set.json"))
+    if meta is None or meta.get("preset") in (None, "svbrdf"):
         raise MapSetError(f"'{folder}' is not a texture set svbrdf can read: it takes {ACCEPTED}.")
     return _preset_maps(folder, meta)
 
@@ -111,12 +106,8 @@ def material_name(folder):
     """The material's name for a set: the ``--name`` it was captured with, else its photo's name, else the
     folder's."""
     folder = os.fspath(folder)
-    try:
-        with open(os.path.join(folder, "material.json"), encoding="utf-8") as f:
-            rec = json.load(f)
-    except (OSError, ValueError):
-        rec = None
-    if isinstance(rec, dict):
+    rec = ownership.read_json(os.path.join(folder, "material.json"))
+    if rec is not None:
         name = (rec.get("options") or {}).get("name") if isinstance(rec.get("options"), dict) else None
         photo = (rec.get("input") or {}).get("file") if isinstance(rec.get("input"), dict) else None
         if name or photo:

@@ -53,8 +53,7 @@ DETAIL_SIGMA = 1.0 / 48.0
 def ramp(n, band=BAND):
     """(n,) weight of the original along one axis: 1 in the middle, smoothly to 0 over ``band`` at each end."""
     d = np.minimum(np.arange(n) + 0.5, n - np.arange(n) - 0.5) / max(band * n, 1.0)
-    t = np.clip(d, 0.0, 1.0)
-    return (t * t * (3.0 - 2.0 * t)).astype(np.float32)  # smoothstep
+    return cv.smoothstep(d, 0.0, 1.0).astype(np.float32)
 
 
 def weights(h, w, band=BAND):
@@ -198,12 +197,3 @@ def line_steps(img, axis):
     t = np.tile(x, (2, 2, 1))
     return np.abs(np.diff(t, axis=axis).mean(axis=1 - axis)).mean(-1)
 
-
-def seam_ratio(img):
-    """The largest line-to-line step of a 2 x 2 tiling of ``img`` (rows and columns) over the median
-    step: a few for a seamless map, far more where a seam runs across it."""
-    ratios = []
-    for axis in (0, 1):
-        s = line_steps(img, axis)
-        ratios.append(float(s.max() / max(float(np.median(s)), 1e-12)))
-    return max(ratios)

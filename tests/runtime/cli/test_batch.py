@@ -19,6 +19,15 @@ from .clitools import make_photo, run
 pytestmark = pytest.mark.skipif("fast" not in installed_tiers(), reason="the fast model is not installed")
 
 
+def _photos(tmp_path, n, *size):
+    """A folder ``in`` of ``n`` generated photos ``p0.png`` … (of ``size`` (h, w) when given)."""
+    d = tmp_path / "in"
+    d.mkdir()
+    for i in range(n):
+        make_photo(d / f"p{i}.png", *size, seed=i)
+    return d
+
+
 def _bad_inputs(d):
     """Every bad-input case of the brief; returns {name: expected words in the error}."""
     (d / "empty.jpg").write_bytes(b"")
@@ -76,10 +85,7 @@ def test_accepted_variants_grey_16bit_alpha_cmyk(tmp_path):
 
 
 def test_batch_resumes_after_an_interruption(tmp_path):
-    d = tmp_path / "in"
-    d.mkdir()
-    for i in range(3):
-        make_photo(d / f"p{i}.png", seed=i)
+    d = _photos(tmp_path, 3)
     out = tmp_path / "out"
     # An interrupted run: p0 finished, p1 killed mid-write (its temporary folder left behind; no
     # process has that pid).
@@ -105,10 +111,7 @@ def test_batch_interrupted_by_a_kill_leaves_only_complete_sets(tmp_path):
     import signal
     import time
 
-    d = tmp_path / "in"
-    d.mkdir()
-    for i in range(6):
-        make_photo(d / f"p{i}.png", 400, 500, seed=i)
+    d = _photos(tmp_path, 6, 400, 500)
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "svbrdf_cli.cli.main", "batch", str(d), "-o", str(out), "--size", "1024", "-q"]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -128,10 +131,7 @@ def test_batch_interrupted_by_a_kill_leaves_only_complete_sets(tmp_path):
 
 def test_a_batch_logged_to_a_file_is_one_line_per_photo(tmp_path):
     """Not a terminal: no progress bar (no carriage returns); warnings on lines of their own."""
-    d = tmp_path / "in"
-    d.mkdir()
-    for i in range(3):
-        make_photo(d / f"p{i}.png", 300, 400, seed=i)
+    d = _photos(tmp_path, 3, 300, 400)
     make_photo(d / "wide.png", 300, 900, seed=4)
     cmd = [sys.executable, "-m", "svbrdf_cli.cli.main", "batch", str(d), "-o", str(tmp_path / "out"), "--size", "256"]
     r = subprocess.run(cmd, capture_output=True, text=True)
@@ -191,10 +191,7 @@ def test_the_gallery_labels_native_maps_plainly_and_wraps_to_the_window(tmp_path
 
 
 def test_resume_redoes_sets_made_with_other_options_and_keeps_the_users_files(tmp_path):
-    d = tmp_path / "in"
-    d.mkdir()
-    for i in range(2):
-        make_photo(d / f"p{i}.png", 300, 400, seed=i)
+    d = _photos(tmp_path, 2, 300, 400)
     out = tmp_path / "out"
     base = ["batch", d, "-o", out, "--size", 256, "--no-preview", "--refine", 0]
     code, text = run(*base)

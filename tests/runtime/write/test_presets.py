@@ -60,7 +60,7 @@ def right(img):
 
 @pytest.mark.parametrize("m", [0.0, 1.0])
 def test_solve_metallic_round_trips_pure_materials(m):
-    # (a metal's colour brighter than METAL_MIN: dimmer "metals" are read as dielectrics, below)
+    # (a metal's colour brighter than METAL_MIN_F0: dimmer "metals" are read as dielectrics, below)
     colour = np.random.default_rng(1).uniform(0.2, 1.0, (200, 3))
     diffuse, specular = metalness_forward(colour, m)
     base, metallic = derive.specular_to_metallic(diffuse, specular)
@@ -74,7 +74,7 @@ def test_solve_metallic_inverts_its_forward_model_for_grey():
     base = np.linspace(0.1, 1.0, 10)[:, None].repeat(3, 1)
     m = np.linspace(0.05, 0.95, 10)[:, None]
     specular = F0 + (base - F0) * m
-    clear = specular[:, 0] >= derive.METAL_MIN  # (below it the metallic root is faded out: see the next tests)
+    clear = specular[:, 0] >= cv.METAL_MIN_F0  # (below it the metallic root is faded out: see the next tests)
     base, m, specular = base[clear], m[clear], specular[clear]
     assert len(m) >= 6
     diffuse = base * (1 - F0) * (1 - m) / (1 - specular.max(-1, keepdims=True))
@@ -114,7 +114,7 @@ def test_metallic_fades_in_without_a_step():
     s = np.linspace(F0, 0.6, 400)[:, None].repeat(3, 1)
     _, m = derive.specular_to_metallic(np.zeros_like(s), s)
     m = m[:, 0]
-    assert m[s[:, 0] <= derive.DIELECTRIC_MAX].max() == 0.0 and m[s[:, 0] >= derive.METAL_MIN].min() > 0.99
+    assert m[s[:, 0] <= cv.DIELECTRIC_MAX_F0].max() == 0.0 and m[s[:, 0] >= cv.METAL_MIN_F0].min() > 0.99
     assert np.all(np.diff(m) >= -1e-6) and np.abs(np.diff(m)).max() < 0.05  # (a step would be 1)
 
 
