@@ -58,7 +58,10 @@ def _setup(threads):
               help="Committed compact checkpoint to resume from when FOLDER holds no state.")
 @click.option("--schedule", default=None, callback=lambda ctx, p, v: _schedule(v),
               help="Samples per stage, e.g. masks=300000,aux=200000,maps=3000000 (default: the run's own).")
-def train(folder, threads, steps, minutes, checkpoint_minutes, eval_minutes, checkpoint, schedule):
+@click.option("--restart-stage", type=click.Choice(["masks", "aux", "maps"]), default=None,
+              help="Train this stage (and those after it) again from its start under the current loss "
+                   "settings; the earlier stages and the run's counters are kept.")
+def train(folder, threads, steps, minutes, checkpoint_minutes, eval_minutes, checkpoint, schedule, restart_stage):
     """Train the swift chain in FOLDER, or resume it; SIGTERM/SIGINT save and exit 0."""
     import dataclasses
 
@@ -71,6 +74,9 @@ def train(folder, threads, steps, minutes, checkpoint_minutes, eval_minutes, che
                if v is not None}
     if changes:
         run.config = dataclasses.replace(run.config, **changes)
+    if restart_stage:
+        run.restart_stage(restart_stage)
+        run.save()
     click.echo(f"run {folder}: step {run.step}, stage {run.stage}, {run.samples} samples, "
                f"{run.cpu / 3600:.2f} CPU h", err=True)
     run.train(steps=steps, minutes=minutes)
@@ -96,7 +102,9 @@ def _schedule(text):
 @click.option("--run", "folder", default="runs/swift", show_default=True)
 @click.option("--schedule", default=None, callback=lambda ctx, p, v: (_schedule(v), v)[1],
               help="Passed to train: samples per stage (default: the run's own).")
-def background(folder, schedule):
+@click.option("--restart-stage", type=click.Choice(["masks", "aux", "maps"]), default=None,
+              help="Passed to train (once: a later resume goes on from the restarted stage).")
+def background(folder, schedule, restart_stage):
     """Resume (or start) the run in FOLDER detached, on one core; its log is FOLDER/log.txt."""
     import os
     import subprocess
@@ -114,7 +122,8 @@ def background(folder, schedule):
     env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
     with open(os.path.join(folder, "log.txt"), "a") as log:
         args = [sys.executable, "-m", "export.engine", "train", "--run", folder, "--threads", "1"]
-        p = subprocess.Popen(args + (["--schedule", schedule] if schedule else []),
+        args += ["--schedule", schedule] if schedule else []
+        p = subprocess.Popen(args + (["--restart-stage", restart_stage] if restart_stage else []),
                              stdout=log, stderr=log, stdin=subprocess.DEVNULL, start_new_session=True, env=env)
     with open(pid_file, "w") as f:
         f.write(str(p.pid))

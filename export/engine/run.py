@@ -59,8 +59,9 @@ class RunConfig:
     real_fraction: float = 0.25
     real_weight: float = 1.0
     real_root: str | None = None
-    #: Maps loss weights (stored encodings, L1).
-    weights: tuple = (("normal", 2.0), ("diffuse", 1.0), ("roughness", 1.0), ("specular", 1.0))
+    #: Maps loss weights: L1 of each map in its stored encoding, and ``relief``, the weight of the
+    #: tilt-correlation term (:func:`relief_loss`).
+    weights: tuple = (("normal", 2.0), ("diffuse", 1.0), ("roughness", 1.0), ("specular", 1.0), ("relief", 0.5))
 
 
 def _config_from(d):
@@ -105,7 +106,27 @@ def net_weights(net):
 
 
 def maps_loss(pred, target, weights):
-    return sum(w * (pred[k].float() - target[k]).abs().mean() for k, w in weights.items())
+    """L1 of each map (stored encodings) plus ``weights["relief"]`` times :func:`relief_loss`."""
+    loss = sum(w * (pred[k].float() - target[k]).abs().mean() for k, w in weights.items() if k != "relief")
+    if weights.get("relief"):
+        loss = loss + weights["relief"] * relief_loss(pred["normal"].float(), target["normal"])
+    return loss
+
+
+def relief_loss(pred, target):
+    """1 - the correlation of predicted and true tilt (normals' x, y about each sample's mean), the
+    batch's mean: the scorer's relief, made a loss.
+
+    Measured on one core (300 steps from the run's checkpoint or from scratch, generated validation):
+    under the L1 terms alone the maps stage leaves the normals flat (tilt correlation 0.00-0.05, mean
+    |tilt| 0.002 against the truth's 0.097) while the other maps improve, though a network trained on
+    the normals alone reaches 0.18 as fast: the other maps' gradients take the shared features, and
+    L1's median is flat wherever the tilt's sign is uncertain. This term rewards the tilt's pattern
+    whatever its depth."""
+    p = pred[:, :2] - pred[:, :2].mean((2, 3), keepdim=True)
+    t = target[:, :2] - target[:, :2].mean((2, 3), keepdim=True)
+    c = (p * t).sum((1, 2, 3)) / ((p * p).sum((1, 2, 3)) * (t * t).sum((1, 2, 3)) + 1e-8).sqrt()
+    return (1 - c).mean()
 
 
 class Run:
@@ -192,6 +213,28 @@ class Run:
         if os.path.isfile(src):
             with open(src) as f, open(os.path.join(out, "curve.jsonl"), "w") as g:
                 g.write(f.read())
+
+    def restart_stage(self, stage):
+        """Train ``stage`` again from its seeded start, and the stages after it, under this code's
+        loss settings (:class:`RunConfig`'s ``weights``, ``real_fraction``, ``real_weight``); the
+        earlier stages keep their weights, and the run's step, samples and CPU time go on counting
+        (the curve keeps what the run has spent)."""
+        names = [s for s, _ in self.config.schedule]
+        if stage not in names:
+            raise ValueError(f"{stage!r}: not a stage of this run ({', '.join(names)})")
+        index = names.index(stage)
+        with torch.random.fork_rng():
+            torch.manual_seed(self.config.seed)
+            fresh = nets.build(self.config.tier)
+        for name in names[index:]:
+            getattr(self.net, name).load_state_dict(getattr(fresh, name).state_dict())
+        d = RunConfig()
+        self.config = dataclasses.replace(self.config, weights=d.weights, real_fraction=d.real_fraction,
+                                          real_weight=d.real_weight)
+        self.net.loss_weights = dict(self.config.weights)
+        self.stage_index, self.stage_samples = index, 0
+        self.optimizer = self._optimizer()
+        self.log(f"stage {stage} restarted at step {self.step} ({self.samples} samples)")
 
     # -- training -----------------------------------------------------------------------------
     def _lr(self):

@@ -1,5 +1,6 @@
 """The fast training engine: bank, batches, flash context, exact resume, clean stop."""
 
+import dataclasses
 import os
 import signal
 import subprocess
@@ -181,6 +182,49 @@ def test_a_schedule_given_on_resume_is_the_runs_from_then_on(tmp_path, small_ban
     assert resumed.stage == "maps" and resumed.step == 5  # the aux stage had its 2 samples: one maps step
     res = CliRunner().invoke(main, ["train", "--run", str(tmp_path / "run"), "--schedule", "aux=2,masks=6,maps=4"])
     assert res.exit_code == 2 and "in that order" in res.output
+
+
+def test_a_restarted_stage_starts_again_and_the_run_keeps_its_counts(tmp_path, small_bank):
+    from click.testing import CliRunner
+
+    from export.engine.cli import main
+
+    run = _run(tmp_path / "run", small_bank)
+    run.train(steps=6, evaluate=False)  # 3 masks, 2 aux, 1 maps step
+    assert run.stage == "maps"
+    trained = {k: v.clone() for k, v in run.net.state_dict().items()}
+    old_weights = dict(CFG.weights, relief=0.0)
+    run.config = dataclasses.replace(run.config, weights=tuple(old_weights.items()))
+    run.save()
+    del run
+    res = CliRunner().invoke(main, ["train", "--run", str(tmp_path / "run"), "--steps", "0", "--checkpoint", "",
+                                    "--restart-stage", "maps"])
+    assert res.exit_code == 0, res.output
+    again = Run(str(tmp_path / "run"), log=lambda m: None, des19=[])
+    assert (again.step, again.samples, again.stage, again.stage_samples) == (6, 12, "maps", 0)
+    assert dict(again.config.weights) == dict(RunConfig().weights)  # this code's loss settings
+    torch.manual_seed(CFG.seed)
+    start = nets.build().state_dict()  # the run's seeded start
+    now = again.net.state_dict()
+    assert all(torch.equal(now[k], start[k]) for k in now if k.startswith("maps."))
+    assert all(torch.equal(now[k], trained[k]) for k in now if not k.startswith("maps."))
+    assert not all(torch.equal(now[k], start[k]) for k in now if k.startswith("masks."))
+    res = CliRunner().invoke(main, ["train", "--run", str(tmp_path / "run"), "--restart-stage", "shading"])
+    assert res.exit_code == 2
+
+
+def test_the_relief_term_rewards_the_tilt_pattern_at_any_depth():
+    from export.engine.run import relief_loss
+
+    g = torch.Generator().manual_seed(0)
+    tilt = torch.randn(2, 2, 16, 16, generator=g) * 0.1
+    truth = cv.encode_normals(cv.normalize(torch.cat([tilt, torch.ones(2, 1, 16, 16)], 1), axis=1))
+    shallow = cv.encode_normals(cv.normalize(torch.cat([tilt * 0.2, torch.ones(2, 1, 16, 16)], 1), axis=1))
+    flipped = cv.encode_normals(cv.normalize(torch.cat([-tilt, torch.ones(2, 1, 16, 16)], 1), axis=1))
+    flat = cv.encode_normals(torch.tensor([0.0, 0.0, 1.0]).reshape(1, 3, 1, 1).expand(2, 3, 16, 16))
+    assert float(relief_loss(shallow, truth)) < 1e-3
+    assert abs(float(relief_loss(flat, truth)) - 1.0) < 1e-6
+    assert float(relief_loss(flipped, truth)) > 1.99
 
 
 def test_sigterm_saves_and_exits_zero(tmp_path, small_bank):
