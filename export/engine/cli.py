@@ -213,13 +213,11 @@ def onnx(folder, out):
     from export.engine import onnx as engine_onnx
     from export.engine.run import Run
 
-    _setup(1)
     run = Run(folder, log=lambda m: None, checkpoint=CHECKPOINT)
-    gain = engine_onnx.tilt_gain(run.net, run._val_batches("maps")) if run.samples else 1.0
     curve = os.path.join(folder, "curve.jsonl")
     last = json.loads(open(curve).read().splitlines()[-1]) if os.path.isfile(curve) else {}
     provenance = {"run": folder, "step": run.step, "samples": run.samples, "cpu_hours": round(run.cpu / 3600, 3),
                   "stage": run.stage, "schedule": run.config.schedule, "bank": "export.engine.bank (procedural, CC0, mixes)",
-                  "des19": last.get("des19"), "tilt_gain": round(gain, 4)}
-    path = engine_onnx.export(run.net, os.path.join(out, "chain.onnx"), provenance, gain=gain)
-    click.echo(f"{path}: {os.path.getsize(path) / 1e6:.1f} MB, {run.samples} samples, tilt gain {gain:.3f}")
+                  "des19": last.get("des19")}
+    path = engine_onnx.export(run.net, os.path.join(out, "chain.onnx"), provenance)
+    click.echo(f"{path}: {os.path.getsize(path) / 1e6:.1f} MB, {run.samples} samples")

@@ -297,29 +297,6 @@ def test_the_exported_chain_matches_torch(tmp_path):
         assert np.abs(g - w.numpy()).max() < 1e-4
 
 
-def test_the_tilt_gain_gives_back_the_depth_a_shy_network_left_out(tmp_path):
-    ort = pytest.importorskip("onnxruntime")
-    from export.engine import onnx as engine_onnx
-
-    torch.manual_seed(0)
-    net = nets.build().eval()  # untrained: returns the base estimate, whose normals we make tilted
-    tilt = torch.randn(2, 2, 64, 64) * 0.1
-    truth = cv.encode_normals(cv.normalize(torch.cat([tilt, torch.ones(2, 1, 64, 64)], 1), axis=1))
-    shy = cv.encode_normals(cv.normalize(torch.cat([tilt / 3, torch.ones(2, 1, 64, 64)], 1), axis=1))
-    photo = torch.rand(2, 3, 64, 64)
-    light = torch.tensor([[0.0, 0.0, 2.4]]).expand(2, 3)
-    base = torch.cat([shy, flash.base(photo, light, light)[:, 3:]], 1)
-    batch = {"photo": photo, "context": flash.context(light, light, 64), "base": base, "normal": truth}
-    gain = engine_onnx.tilt_gain(net, [batch])
-    assert 2.8 < gain < 3.2
-    flat = dict(batch, base=flash.base(photo, light, light))
-    assert engine_onnx.tilt_gain(net, [flat]) == 1.0  # no tilt predicted: nothing to scale
-    path = engine_onnx.export(net, str(tmp_path / "chain.onnx"), gain=gain)
-    sess = ort.InferenceSession(path, providers=["CPUExecutionProvider"])
-    got = sess.run(None, {k: batch[k][:1].numpy() for k in ("photo", "context", "base")})[2][:, :3]
-    assert np.abs(got - truth[:1].numpy()).max() < 0.01
-
-
 def test_the_runtime_runs_the_exported_chain_as_torch_does(tmp_path):
     pytest.importorskip("onnxruntime")
     from click.testing import CliRunner
