@@ -5,6 +5,7 @@ photo")."""
 import json
 
 import numpy as np
+import pytest
 
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.imageio import read_image, write_image
@@ -107,3 +108,53 @@ def test_a_foil_whose_highlight_is_its_colour_keeps_a_coloured_specular(tmp_path
     code, out = run("capture", foil, "-o", tmp_path / "g", "--preset", "gltf", "--no-preview")
     assert code == 0, out
     assert read_image(tmp_path / "g" / "foil" / "metallicRoughness.png")[..., 2].max() == 0.0
+
+
+def _spotted_plaster_photo(path, side=256, seed=5):
+    """A flash photo of white plaster with dark spots all over it but for a clear disc where the flash
+    points (paper_real IMG_7308); returns (path, the plaster's (H, W) bool mask)."""
+    from svbrdf_cli.shading import render_maps
+
+    rng = np.random.default_rng(seed)
+    grain = blur(rng.normal(0.0, 1.0, (side, side)).astype(np.float32), 1.0)
+    albedo = 0.7 * (1.0 + 0.1 * grain / grain.std())
+    yy, xx = np.mgrid[:side, :side] - side / 2.0
+    plaster = np.ones((side, side), bool)
+    for _ in range(60):
+        cy, cx = rng.uniform(-side / 2, side / 2, 2)
+        if np.hypot(cy, cx) > 0.3 * side:
+            plaster &= np.hypot(yy - cy, xx - cx) > 0.035 * side
+    albedo = np.where(plaster, albedo, 0.03).astype(np.float32)
+    maps = {"normal": np.tile(np.float32([0, 0, 1]), (side, side, 1)),
+            "diffuse": np.repeat(albedo[..., None], 3, -1), "roughness": np.full((side, side, 1), 0.5, np.float32),
+            "specular": np.full((side, side, 3), cv.DIELECTRIC_F0, np.float32)}
+    lin = render_maps(maps, light=cv.FLASH_POSITION, intensity=cv.LIGHT_INTENSITY)
+    write_image(path, cv.linear_to_srgb(np.clip(lin, 0.0, 1.0)).astype(np.float32))
+    return path, plaster
+
+
+def _plaster_spot_over_ring(tmp_path, *options):
+    photo, plaster = _spotted_plaster_photo(tmp_path / "plaster.png")
+    code, out = run("capture", photo, "-o", tmp_path / "o", "--preset", "gltf", "--no-preview", *options)
+    assert code == 0, out
+    lin = luminance(cv.srgb_to_linear(read_image(tmp_path / "o" / "plaster" / "baseColor.png")))
+    side = lin.shape[0]
+    yy, xx = np.mgrid[:side, :side] - side / 2.0
+    r = np.hypot(yy, xx)
+    spot, ring = (r < 0.15 * side) & plaster, (r > 0.35 * side) & (r < 0.5 * side) & plaster
+    return lin[spot].mean() / lin[ring].mean()
+
+
+def test_a_pattern_round_the_flash_spot_does_not_make_a_disc_of_it(tmp_path):
+    # the estimate's trend with the distance to the flash is read on each ring's middle values, not its
+    # mean: the dark spots in the rings round a spotless flash spot darkened the plaster there (0.51 of
+    # its level in the ring here, as on paper_real IMG_7308)
+    bright = _plaster_spot_over_ring(tmp_path, "--refine", "0")
+    assert 0.8 <= bright <= 1.25, bright
+
+
+@pytest.mark.xfail(reason="--refine's ring means of its change read the spots as a trend too (0.75; a robust ring "
+                          "level there broke three refine tests): issue 32", strict=True)
+def test_a_pattern_round_the_flash_spot_does_not_make_a_disc_of_it_with_refine(tmp_path):
+    bright = _plaster_spot_over_ring(tmp_path)
+    assert 0.8 <= bright <= 1.25, bright
