@@ -1,6 +1,6 @@
 """Export the trained stages to ONNX for the torch-free runtime.
 
-    python -m export.onnx_export --run runs/fast --out svbrdf_cli/models/fast
+    python -m export.onnx_export --run runs/fast --out EXPORT       # then: svbrdf capture PHOTO --model EXPORT
 
 One file per stage of the run's variant, each a function of named tensors (NCHW
 float32, values in [0, 1]; maps in their stored encoding, see ``svbrdf_cli.conventions``):

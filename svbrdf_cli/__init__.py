@@ -4,7 +4,7 @@ The library in three calls, what ``svbrdf capture`` and ``svbrdf export`` do::
 
     import svbrdf_cli
 
-    model = svbrdf_cli.load_model("physical")          # or "lite", "fast", "auto", a folder
+    model = svbrdf_cli.load_model("physical")          # or "auto", or a folder of exported models
     folder, record = svbrdf_cli.capture("photo.jpg", "textures", model=model, preset="gltf")
     maps = svbrdf_cli.read_map_set(folder)
     svbrdf_cli.write_preset("unreal", "textures_ue/photo", maps)

@@ -129,7 +129,7 @@ def problems(code):
 
 
 def test_the_checker_finds_what_is_wrong():
-    assert problems("svbrdf capture photo.jpg -o out --model fast --size 2048") == []
+    assert problems("svbrdf capture photo.jpg -o out --model auto --size 2048") == []
     assert problems(".venv/bin/svbrdf -v batch shoot/ -o s3://b/t --engine ray && svbrdf --version") == []
     assert problems("svbrdf COMMAND --help") == [] and problems("svbrdf[scale]") == []
     assert problems("svbrdf capture photo.jpg --no-such-option") == ["no option --no-such-option on svbrdf capture"]

@@ -14,7 +14,9 @@ candidate, below it) take the next tier.
 The rule kept is the *cheapest* whose mean error is within ``--margin``
 (relative) of the best single tier's; ties go to the lower error. "Never step
 up" is one of the candidates, so when the cheap tier is already as good as
-the next on these photos, the rule says so.
+the next on these photos, the rule says so. With the physical estimate the
+only installed tier, the ladder is that one rung and has no step; its error
+and cost are measured all the same.
 
 **Evidence** (:func:`evidence`, run by ``python -m export.studies.benchmark``): the
 shipped rule, frozen, on Des19 (per-photo relighting error of each tier and of
@@ -154,8 +156,8 @@ def calibrate(samples, chains=None, margin=MARGIN, repeat=5, log=print):
 
         chains = {t: load_model(t) for t in auto_tier.available_tiers()}
     ladder = list(chains)
-    if len(ladder) < 2:
-        raise SvbrdfError(f"--model auto needs two installed tiers; found {', '.join(ladder) or 'none'}")
+    if not ladder:
+        raise SvbrdfError("--model auto needs an installed tier; found none")
     cost, sig_cost = tier_seconds(chains, repeat)
     errors, values = collect(chains, samples, log)
     steps, report = [], []
@@ -245,8 +247,8 @@ def evidence(rule, des19, nine=None, real=(), chains=None, log=print):
             # What a perfect per-photo choice would reach, and whether the signals would have told it
             # (a diagnostic on this set, never used to set the rule).
             row["better_of_tiers"] = float(np.min([per_photo[t] for t in tiers], axis=0).mean())
-            nxt = rule["ladder"][1]
-            if len(items) > 2:
+            if len(rule["ladder"]) > 1 and len(items) > 2:
+                nxt = rule["ladder"][1]
                 d = per_photo[nxt] - per_photo[cheap]
                 row["correlation"] = {n: _correlation(v, d) for n, v in signals.items()}
                 row["next_better_on"] = float((d < 0).mean())
@@ -285,9 +287,12 @@ def evidence_table(ev, ladder):
 
 def calibration_table(rule):
     cal = rule["calibration"]
-    lines = [f"Calibration: {cal['data']}; tolerance {100 * cal['margin']:.0f} % over the best single tier.", "",
-             "| step | signal | cost of the signal (s) | corr(signal, next − this tier's error) | cheapest threshold "
-             "within tolerance | error | s/photo | stepped up |", "|---|---|---|---|---|---|---|---|"]
+    lines = [f"Calibration: {cal['data']}; tolerance {100 * cal['margin']:.0f} % over the best single tier.", ""]
+    if not cal["steps"]:
+        lines.append(f"The ladder is one tier ({rule['ladder'][0]}): there is no step to calibrate.")
+    else:
+        lines += ["| step | signal | cost of the signal (s) | corr(signal, next − this tier's error) | cheapest "
+                  "threshold within tolerance | error | s/photo | stepped up |", "|---|---|---|---|---|---|---|---|"]
     for st in cal["steps"]:
         for n in auto_tier.SIGNALS:
             c = st["cheapest_per_signal"].get(n)

@@ -298,9 +298,11 @@ def run(limit=None, repeat=5, figures="docs/figures", tables="docs/tables", stab
     by_name = {m.name: m for m in methods}  # the sessions loaded above serve every part below
     tier = DEFAULT_MODEL  # what svbrdf capture runs unless told otherwise
     chain = by_name[tier].chain
-    # --confidence measures how the maps move under rotation: for the physical estimate (whose
-    # roughness and specular are constants) that says nothing, so the evidence is the fast chain's.
-    conf_tier = tier if tier != "physical" or "fast" not in by_name else "fast"
+    # A network's --confidence measures how its maps move under rotation: for the physical estimate (whose
+    # roughness and specular are constants) that says nothing, so the evidence is the last network's run
+    # here (the dearest installed tier, else the end-to-end baseline).
+    networks = [m.name for m in methods if isinstance(m, method_zoo.Network)]
+    conf_tier = tier if tier != "physical" or not networks else networks[-1]
     results["confidence"] = {"tier": conf_tier, "maps": confidence_evidence(by_name[conf_tier].chain, samples)}
     real = stability_suite.real_crops(root / "real", limit or REAL_PHOTOS) if os.path.isdir(root / "real") else []
     real_inputs = [(name, network_input(lin)) for name, lin in real]  # once, for colour and auto

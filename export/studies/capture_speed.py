@@ -180,7 +180,8 @@ def _arguments(argv=None):
     p.add_argument("--photo", default=None, help="Photo to run on (default: a synthetic 4000x3000 JPEG).")
     p.add_argument("--sizes", default="256,1024,2048", help="Output sizes (comma-separated; default %(default)s).")
     p.add_argument("--repeat", type=int, default=3, help="Timed runs per configuration (median; default %(default)s).")
-    p.add_argument("--model", default="fast", help="default: %(default)s")
+    p.add_argument("--model", default="physical",
+                   help="A --model value: physical, auto or a folder of exported models (default %(default)s).")
     p.add_argument("--threads", type=int, default=0, help="onnxruntime threads (0: one per core).")
     p.add_argument("--json", dest="json_out", default=None, help="Also write the figures here.")
     p.add_argument("--throughput", type=int, default=0,

@@ -1,7 +1,7 @@
 """Real detail or upsampled blur? The detail ratio of each map of ``svbrdf capture``'s output.
 
     python -m export.studies.detail_eval                      # 12 real photos at their crop's size (<= 1024) and the DNG at 2048
-    python -m export.studies.detail_eval --model fast --upsample bicubic
+    python -m export.studies.detail_eval --model EXPORT --upsample bicubic
 
 The **detail ratio** of a map is its high-frequency energy over the photo's, both at the output
 size: the mean square of what a Gaussian blur of :data:`SIGMA` pixels takes away, on the

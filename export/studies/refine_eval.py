@@ -195,7 +195,7 @@ def figure(photos, path, iterations=refine.DEFAULT_ITERATIONS, tile=192, side_li
 
 
 @click.command()
-@click.option("--methods", default=None, help="Comma-separated method names (default: physical and every shipped tier).")
+@click.option("--methods", default=None, help="Comma-separated method names (default: physical and every installed tier).")
 @click.option("--iterations", default=refine.DEFAULT_ITERATIONS, show_default=True)
 @click.option("--limit", type=int, default=None, help="Only the first N Des19 samples.")
 @click.option("--repeat", default=3, show_default=True, help="Runs per timing (median); 0: no capture timing.")

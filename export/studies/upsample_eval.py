@@ -1,7 +1,7 @@
 """How well do maps reach high resolution? Guided against bicubic upsampling, measured.
 
     python -m export.studies.upsample_eval                 # CC0 seeds (../shared/data) + the glazed tiles, 1024 px
-    python -m export.studies.upsample_eval --model fast    # also through the shipped networks
+    python -m export.studies.upsample_eval --model EXPORT  # also through a network (a folder of exported models)
 
 Ground-truth maps at ``--size`` are rendered into a flash photo with the
 runtime's renderer. Two low-resolution sources are upsampled back to

@@ -6,7 +6,7 @@ import click
 
 from svbrdf_cli.infer.chain import ModelError, installed_tiers
 from svbrdf_cli.infer.exposure import MAX_EXPOSURE_STOPS
-from svbrdf_cli.infer.registry import AUTO, check_model
+from svbrdf_cli.infer.registry import AUTO, check_model, model_names
 
 
 def numbers(count, what, positive=False):
@@ -76,7 +76,11 @@ def model_value(ctx, param, value):
 def model_help():
     """``--model``'s help: what it accepts, naming the networks installed here (only those)."""
     tiers = installed_tiers()
+    auto = ""
+    if AUTO in model_names():
+        auto = (f", '{AUTO}' (per photo, the cheapest of physical and the installed networks that is good enough for it)"
+                if tiers else f", '{AUTO}' (per photo, the cheapest installed model good enough for it: with no network "
+                              "installed, physical)")
     return ("'physical' (the maps computed from the flash physics: today's most accurate)"
             + (f", an installed network ({', '.join(tiers)})" if tiers else "")
-            + f", '{AUTO}' (per photo, the cheapest of physical and the installed networks that is good enough "
-              "for it) or a folder of exported models.")
+            + auto + " or a folder of exported models.")

@@ -1,7 +1,8 @@
 """``--model auto``: per photo, the cheapest installed tier that is good enough for the scene.
 
 The ladder starts with the physical estimate (``physical``, :mod:`svbrdf_cli.infer.physical`: the default
-model, computed rather than learnt, and the cheapest), then the installed networks.
+model, computed rather than learnt, and the cheapest), then the installed networks. With no network
+installed the ladder is the physical estimate alone, with no step: ``auto`` is then ``physical``.
 
 The rule lives in ``models/auto.json`` (written by ``python -m export.studies.auto_calibration``,
 with the numbers it was chosen on). It is a *ladder* of tiers, cheapest first,

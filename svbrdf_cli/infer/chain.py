@@ -25,9 +25,10 @@ STAGES = ("masks", "aux", "maps")
 #: Pixels of reflected photo around the networks' input, cropped off their output (see :meth:`Chain.__call__`).
 BORDER_MARGIN = 32
 
-#: Shipped model sets live here, one folder per tier.
+#: Installed model sets live here, one folder per tier, beside ``--model auto``'s rule (``auto.json``).
 MODELS_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "models")
-#: Tiers, cheapest first: ``lite`` is one end-to-end UNet (maps.onnx only), the others the three-stage chain.
+#: Names an installed tier may have, cheapest first (``export.nets.chain``'s tiers): ``lite`` is one
+#: end-to-end UNet (maps.onnx only), the others the three-stage chain.
 TIERS = ("lite", "fast", "balanced", "best")
 #: The extra network input of models that refine the physical estimate: its four stored maps
 #: stacked as 10 channels (normal 3, diffuse 3, roughness 1, specular 3).

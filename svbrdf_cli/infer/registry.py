@@ -1,8 +1,9 @@
 """What ``--model`` names, ready to run.
 
-``--model`` is ``physical`` (the maps computed from the flash physics, :mod:`svbrdf_cli.infer.physical`), a
-shipped tier (:data:`svbrdf_cli.infer.chain.TIERS`), ``auto`` (per photo, the cheapest tier good
-enough for it, :mod:`svbrdf_cli.infer.auto`) or a folder of exported models. Everything that runs
+``--model`` is ``physical`` (the maps computed from the flash physics, :mod:`svbrdf_cli.infer.physical`), an
+installed network tier (a folder of :data:`svbrdf_cli.infer.chain.MODELS_DIR` named for one of
+:data:`svbrdf_cli.infer.chain.TIERS`), ``auto`` (per photo, the cheapest installed model good enough
+for it, :mod:`svbrdf_cli.infer.auto`) or a folder of exported models. Everything that runs
 maps (the local batch, the Ray workers, the speed benchmark) loads them here, so that neither
 :mod:`svbrdf_cli.infer.chain` nor :mod:`svbrdf_cli.infer.auto` has to know the other.
 """
@@ -17,7 +18,7 @@ from svbrdf_cli.infer.physical import NAME as PHYSICAL
 #: What ``svbrdf capture`` runs without ``--model``: the physical estimate, until a trained
 #: model beats it on Des19 (every map) and on the real 9-light card (docs/benchmarks.md).
 DEFAULT_MODEL = PHYSICAL
-#: ``--model auto``: per photo, the cheapest installed tier good enough for it (:mod:`svbrdf_cli.infer.auto`).
+#: ``--model auto``: per photo, the cheapest installed model good enough for it (:mod:`svbrdf_cli.infer.auto`).
 AUTO = "auto"
 
 

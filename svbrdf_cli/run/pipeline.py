@@ -193,12 +193,12 @@ def refine_maps(prepared, chain, net_in, stored, iterations, progress=None):
     return res.stored, {"geometry": geo.report(), "refine": res.report}
 
 
-def capture(prepared, chain, out_root, opts, model_name="fast", progress=None):
+def capture(prepared, chain, out_root, opts, model_name="physical", progress=None):
     """Infer and write the texture set of a :class:`Prepared` photo; returns (folder, record)."""
     return infer_set(prepared, chain, out_root, opts, model_name, progress)()
 
 
-def infer_set(prepared, chain, out_root, opts, model_name="fast", progress=None):
+def infer_set(prepared, chain, out_root, opts, model_name="physical", progress=None):
     """The model's part of :func:`capture` (infer, refine, upsample): returns a function of no
     arguments that writes the set (preview, PNG encoding, the atomic rename) and returns (folder,
     record). A batch runs it on a thread while the next photo is in the model. ``progress(done,

@@ -49,9 +49,28 @@ def test_the_signals_own_cost_counts():
     assert chosen["threshold"] is not None and chosen["error"] <= min(err_lo.mean(), err_hi.mean()) * 1.02
 
 
-def test_calibration_needs_two_tiers_and_says_so():
+def test_calibration_needs_a_tier_and_says_so():
     from export.studies.auto_calibration import calibrate
     from svbrdf_cli.errors import SvbrdfError
 
-    with pytest.raises(SvbrdfError, match="two installed tiers; found lite"):
-        calibrate([], chains={"lite": None})
+    with pytest.raises(SvbrdfError, match="needs an installed tier; found none"):
+        calibrate([], chains={})
+
+
+def test_a_ladder_of_the_physical_estimate_alone_has_no_step(tmp_path):
+    """With no network installed the rule is the estimate for every photo, its error and cost measured."""
+    import json
+
+    from export.studies.auto_calibration import calibrate, calibration_table, generated
+    from svbrdf_cli.infer import auto as auto_tier
+    from svbrdf_cli.infer.physical import PhysicalModel
+
+    rule = calibrate(generated(3, size=64), chains={"physical": PhysicalModel()}, repeat=1, log=None)
+    assert rule["ladder"] == ["physical"] and rule["steps"] == []
+    cal = rule["calibration"]
+    assert cal["tiers_taken"] == {"physical": 3} and cal["steps"] == []
+    assert 0 < cal["auto_error"] == cal["tier_error"]["physical"] < 1 and cal["tier_seconds_256"]["physical"] > 0
+    assert "no step to calibrate" in calibration_table(rule)
+    p = tmp_path / "auto.json"
+    p.write_text(json.dumps(rule))
+    assert auto_tier.load_rule(str(p))["ladder"] == ["physical"]

@@ -40,13 +40,20 @@ def test_benchmark_runs_on_two_samples(shared_data, tmp_path):
 
     res = benchmark.run(limit=2, repeat=1, figures=str(tmp_path / "fig"), tables=str(tmp_path / "tab"),
                         log=lambda *a: None)
+    from export.studies import methods as method_zoo
+    from svbrdf_cli.infer.chain import installed_tiers
+
     rows = {r["name"]: r for r in res["methods"]}
-    assert {"floor", "lite", "fast", "auto", "paper"} <= set(rows)
-    for name in ("floor", "lite", "fast", "auto"):
+    assert {"floor", "physical", "physical+refine", *installed_tiers(), "auto", "paper"} <= set(rows)
+    measured = [r["name"] for r in res["methods"] if r["name"] not in ("paper", "reference")]
+    assert measured == [m.name for m in method_zoo.available(refined=True)]  # every runnable method, once
+    for name in measured:
         r = rows[name]
         assert all(0 < r[k] < 1 for k in cv.MAP_NAMES + ("des19_relight", "real_relight")), r
         assert 0 < r["s_256"] and 0 < r["s_2048"]
     assert res["samples"] == 2 and set(res["confidence"]["maps"]) == set(cv.MAP_NAMES)
+    networks = [n for n in measured if n == "e2e" or n in installed_tiers()]  # --confidence: a network's passes
+    assert res["confidence"]["tier"] == (networks[-1] if networks else "physical")
     st = res["stability"]
     assert set(st["rows"]) == set(stability.PERTURBATIONS) and st["failures"] == []
     assert st["photos"] == {"des19": 2, "real": 2}

@@ -7,7 +7,7 @@ import pytest
 
 from export.studies import methods as method_zoo
 from svbrdf_cli import conventions as cv
-from svbrdf_cli.infer.chain import MODELS_DIR, Chain, ModelError, installed_tiers
+from svbrdf_cli.infer.chain import Chain, ModelError, installed_tiers
 from svbrdf_cli.infer.physical import PhysicalModel
 
 
@@ -50,17 +50,19 @@ def test_physical_returns_only_the_four_maps():
         np.testing.assert_array_equal(maps[k], full[k])
 
 
-@pytest.mark.parametrize("tier", ["fast", "lite"])
-def test_network_runs_the_runtime_chain_and_keeps_the_maps(tier):
-    if tier not in installed_tiers():
-        pytest.skip(f"the {tier} tier is not installed")
-    folder = os.path.join(MODELS_DIR, tier)
+@pytest.mark.parametrize("network", ["chain_model", "swift_model"])
+def test_network_runs_the_runtime_chain_and_keeps_the_maps(network, request):
+    from svbrdf_cli.infer.swift import SwiftModel
+
+    folder = request.getfixturevalue(network)  # per-stage networks (Chain) or a swift chain (SwiftModel)
     x = _photo(64, 64)
-    net = method_zoo.Network(tier, folder, threads=1)
-    assert net.name == net.label == tier
+    net = method_zoo.Network("net", folder, threads=1)
+    assert net.name == net.label == "net"
     maps = net(x)
     _check_map_set(maps, 64, 64)
-    ref = Chain(folder, threads=1)(x)
+    runtime = (Chain if network == "chain_model" else SwiftModel)(folder, threads=1)
+    assert type(net.chain) is type(runtime)
+    ref = runtime(x)
     for k in cv.MAP_NAMES:
         np.testing.assert_allclose(maps[k], ref[k], atol=1e-6)
 

@@ -11,12 +11,8 @@ import pytest
 
 from svbrdf_cli.write import ownership
 from svbrdf_cli.imageio import write_image
-from svbrdf_cli.infer.chain import installed_tiers
 
 from .clitools import make_photo, run
-
-
-pytestmark = pytest.mark.skipif("fast" not in installed_tiers(), reason="the fast model is not installed")
 
 
 def _photos(tmp_path, n, *size):

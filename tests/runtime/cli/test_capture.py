@@ -9,12 +9,9 @@ import pytest
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.imageio import read_image
 from svbrdf_cli.infer.chain import TIERS, installed_tiers
-from svbrdf_cli.infer.registry import DEFAULT_MODEL
+from svbrdf_cli.infer.registry import AUTO, DEFAULT_MODEL, model_names
 
 from .clitools import SAMPLE, make_photo, run
-
-
-pytestmark = pytest.mark.skipif("fast" not in installed_tiers(), reason="the fast model is not installed")
 
 
 def test_capture_writes_the_native_set_with_record_and_preview(tmp_path):
@@ -34,9 +31,9 @@ def test_capture_writes_the_native_set_with_record_and_preview(tmp_path):
     assert read_image(folder / "preview.png").shape == (512, 1024, 3)
 
 
-def test_debug_and_presets(tmp_path):
+def test_debug_and_presets(tmp_path, swift_model):
     photo = make_photo(tmp_path / "wood.png")
-    code, out = run("capture", photo, "-o", tmp_path / "ue", "--preset", "unreal", "--debug", "--model", "fast")
+    code, out = run("capture", photo, "-o", tmp_path / "ue", "--preset", "unreal", "--debug", "--model", swift_model)
     assert code == 0, out
     files = set(os.listdir(tmp_path / "ue" / "wood"))
     assert {"T_wood_BC.png", "T_wood_N.png", "T_wood_ORM.png", "T_wood_H.png", "texture_set.json", "material.json",
@@ -51,8 +48,19 @@ def test_debug_and_presets(tmp_path):
     assert "preview.png" not in os.listdir(tmp_path / "gl" / "wood")
 
 
-def test_confidence_maps(tmp_path):
-    code, out = run("capture", SAMPLE, "-o", tmp_path, "--size", 256, "--confidence", "--no-preview", "--model", "fast")
+def test_debug_of_per_stage_networks(tmp_path, chain_model):
+    photo = make_photo(tmp_path / "wood.png")
+    code, out = run("capture", photo, "-o", tmp_path / "o", "--debug", "--refine", 0, "--no-preview", "--model", chain_model)
+    assert code == 0, out
+    assert sorted(os.listdir(tmp_path / "o" / "wood" / "debug")) == sorted(
+        f"{k}.png" for k in ("input", "M_b", "M_h", "I_bf", "I_hr", "I_hr2"))
+    rec = json.loads((tmp_path / "o" / "wood" / "material.json").read_text())
+    assert rec["model"]["name"] == str(chain_model) and rec["model"]["folder"] == os.path.abspath(chain_model)
+
+
+def test_confidence_maps_of_a_network(tmp_path, swift_model):
+    code, out = run("capture", SAMPLE, "-o", tmp_path, "--size", 256, "--confidence", "--no-preview",
+                    "--model", swift_model)
     assert code == 0, out
     folder = tmp_path / "glazed_tiles"
     assert sorted(os.listdir(folder / "confidence")) == sorted(f"{k}.png" for k in cv.MAP_NAMES)
@@ -89,6 +97,7 @@ def test_model_help_lists_installed_models_and_others_are_usage_errors(tmp_path,
     help_text = " ".join(out.split())
     for tier in TIERS:
         assert (tier in help_text) == (tier in installed_tiers()), tier
+    assert "'physical'" in help_text and (f"'{AUTO}'" in help_text) == (AUTO in model_names())
     src = SAMPLE if command == "capture" else os.path.dirname(SAMPLE)
     for name in [t for t in TIERS if t not in installed_tiers()] + ["nope", str(tmp_path / "no_such_folder")]:
         code, out = run(command, src, "-o", tmp_path / "o", "--model", name)
@@ -190,14 +199,14 @@ def test_refine_rejects_counts_out_of_range(tmp_path):
     assert code == 2 and "-3" in out and not (tmp_path / "x").exists()
 
 
-def test_the_physical_estimate_runs_at_the_output_size(tmp_path):
+def test_the_physical_estimate_runs_at_the_output_size(tmp_path, swift_model):
     photo = make_photo(tmp_path / "plaster.png", h=600, w=800)
     code, out = run("capture", photo, "-o", tmp_path / "p", "--size", 512, "--refine", 0, "--model", "physical")
     assert code == 0, out
     rec = json.loads((tmp_path / "p" / "plaster" / "material.json").read_text())
     assert rec["upsampling"] == "model at output size" and "network_full_size" in rec["timings_s"]
-    code, out = run("capture", photo, "-o", tmp_path / "f", "--size", 512, "--refine", 0, "--model", "fast")
-    assert code == 0, out
+    code, out = run("capture", photo, "-o", tmp_path / "f", "--size", 512, "--refine", 0, "--model", swift_model)
+    assert code == 0, out  # a network runs at its own size: its maps are upsampled
     assert json.loads((tmp_path / "f" / "plaster" / "material.json").read_text())["upsampling"] == "guided"
 
 

@@ -3,15 +3,10 @@
 import json
 
 import numpy as np
-import pytest
 
 from svbrdf_cli.imageio import read_image, write_image
-from svbrdf_cli.infer.chain import installed_tiers
 
 from .clitools import SAMPLE, run
-
-
-pytestmark = pytest.mark.skipif("fast" not in installed_tiers(), reason="the fast model is not installed")
 
 
 def test_marker_capture_end_to_end(tmp_path):

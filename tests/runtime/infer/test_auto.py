@@ -1,4 +1,7 @@
-"""``--model auto``: the rule's logic, that its maps are exactly one tier's, and the CLI's record."""
+"""``--model auto``: the rule's logic, that its maps are exactly one tier's, and the CLI's record.
+
+The ladders here step from the physical estimate to a network exported for the tests
+(``swift_model``, ``tests/conftest.py``), named ``net`` in the rule."""
 
 import json
 import os
@@ -12,8 +15,14 @@ from svbrdf_cli import conventions as cv
 from svbrdf_cli.infer.chain import ModelError, installed_tiers
 from svbrdf_cli.infer.registry import load_model
 
-LADDER = [t for t in ("lite", "fast") if t in installed_tiers()]
-needs_two = pytest.mark.skipif(len(LADDER) < 2, reason="auto needs the lite and fast tiers installed")
+NET = "net"
+LADDER = [auto_tier.PHYSICAL, NET]
+
+
+@pytest.fixture
+def load(swift_model):
+    """``load_model`` with ``net`` the test network's folder."""
+    return lambda tier, threads=0: load_model(str(swift_model) if tier == NET else tier, threads=threads)
 
 
 def _rule(*steps):
@@ -40,11 +49,10 @@ def _photo(seed=0, size=64):
                    0, 1).astype(np.float32)
 
 
-@needs_two
 @pytest.mark.parametrize("threshold,chosen", [(None, 0), (-1.0, 1)])
-def test_auto_returns_exactly_the_chosen_tiers_maps(threshold, chosen):
+def test_auto_returns_exactly_the_chosen_tiers_maps(threshold, chosen, load):
     rule = {"ladder": LADDER, "steps": [{"signal": "contrast", "threshold": threshold, "above": True}]}
-    auto = auto_tier.AutoModel(load_model, rule, threads=1)
+    auto = auto_tier.AutoModel(load, rule, threads=1)
     img = _photo()
     out = auto(img)
     tier = LADDER[chosen]
@@ -52,8 +60,10 @@ def test_auto_returns_exactly_the_chosen_tiers_maps(threshold, chosen):
     assert auto.used is auto.chain(tier) and auto.decision["chosen"] == tier
     for k in cv.MAP_NAMES:
         np.testing.assert_array_equal(out[k], ref[k])
+    other = auto.chain(LADDER[1 - chosen])(img)  # the two rungs' maps differ: the test can tell them apart
+    assert any(np.abs(out[k] - other[k]).max() > 0.01 for k in cv.MAP_NAMES)
     rec = auto.describe()
-    assert rec["tier"] == tier and rec["auto"]["steps"][0]["stepped_up"] == bool(chosen)
+    assert rec["tier"] == auto.chain(tier).describe()["tier"] and rec["auto"]["steps"][0]["stepped_up"] == bool(chosen)
     assert any(k.startswith(f"{tier}_") for k in auto.timings)
     if threshold is None:  # a step that never climbs computes no signal
         assert rec["auto"]["steps"][0]["signal"] is None and not any(k.startswith("signal") for k in auto.timings)
@@ -62,11 +72,11 @@ def test_auto_returns_exactly_the_chosen_tiers_maps(threshold, chosen):
         assert "signal_contrast" in auto.timings
 
 
-@needs_two
+@pytest.mark.parametrize("cheap", [auto_tier.PHYSICAL, NET])
 @pytest.mark.parametrize("name", list(auto_tier.SIGNALS))
-def test_signals_are_finite_numbers(name):
-    rule = {"ladder": LADDER, "steps": [{"signal": name, "threshold": None}]}
-    chain = auto_tier.AutoModel(load_model, rule, threads=1).chain(LADDER[0])
+def test_signals_are_finite_numbers(name, cheap, load):
+    rule = {"ladder": [cheap, NET], "steps": [{"signal": name, "threshold": None}]}
+    chain = auto_tier.AutoModel(load, rule, threads=1).chain(cheap)
     img = _photo(1)
     maps = chain(img)
     v = auto_tier.signal(name, img, {k: maps[k] for k in cv.MAP_NAMES}, chain)
@@ -81,12 +91,11 @@ def test_a_missing_or_unusable_rule_is_a_clear_error(tmp_path):
     if "best" not in installed_tiers():
         with pytest.raises(ModelError, match="best is not installed"):
             auto_tier.load_rule(str(p))
-    p.write_text(json.dumps({"ladder": installed_tiers()[:1] * 2, "steps": [{"signal": "moon", "threshold": 1}]}))
+    p.write_text(json.dumps({"ladder": [auto_tier.PHYSICAL] * 2, "steps": [{"signal": "moon", "threshold": 1}]}))
     with pytest.raises(ModelError, match="re-run python -m export.studies.auto_calibration"):
         auto_tier.load_rule(str(p))
 
 
-@needs_two
 def test_capture_with_model_auto_records_the_tier_and_why(tmp_path):
     from svbrdf_cli.cli.main import cli
     from svbrdf_cli.imageio import write_image
@@ -110,21 +119,32 @@ def test_capture_with_model_auto_records_the_tier_and_why(tmp_path):
 
 
 @pytest.mark.parametrize("threshold,chosen", [(None, 0), (-1.0, 1)])
-def test_the_ladder_starts_with_the_physical_estimate(threshold, chosen, tmp_path):
+def test_the_ladder_starts_with_the_physical_estimate(threshold, chosen, tmp_path, load):
     from svbrdf_cli.infer.physical import PhysicalModel
 
-    if not installed_tiers():
-        pytest.skip("no network tier installed to step up to")
-    rule = {"ladder": [auto_tier.PHYSICAL, installed_tiers()[0]],
-            "steps": [{"signal": "contrast", "threshold": threshold, "above": True}]}
     p = tmp_path / "auto.json"
-    p.write_text(json.dumps(rule))
-    assert auto_tier.load_rule(str(p))["ladder"][0] == "physical"  # needs no model file
-    auto = auto_tier.AutoModel(load_model, rule, threads=1)
+    p.write_text(json.dumps({"ladder": [auto_tier.PHYSICAL], "steps": []}))
+    assert auto_tier.load_rule(str(p))["ladder"] == ["physical"]  # needs no model file
+    rule = {"ladder": LADDER, "steps": [{"signal": "contrast", "threshold": threshold, "above": True}]}
+    auto = auto_tier.AutoModel(load, rule, threads=1)
     img = _photo(3)
     out = auto(img)
     ref = (PhysicalModel() if chosen == 0 else auto.chain(rule["ladder"][1]))(img)
     assert auto.decision["chosen"] == rule["ladder"][chosen]
     for k in cv.MAP_NAMES:
         np.testing.assert_array_equal(out[k], ref[k])
-    assert auto.describe()["tier"] == rule["ladder"][chosen]
+    assert isinstance(auto.used, PhysicalModel) == (chosen == 0)
+    assert auto.describe()["tier"] == ("physical" if chosen == 0 else "swift")
+
+
+def test_with_the_physical_estimate_alone_auto_is_the_physical_estimate():
+    """The ladder of the estimate alone has no step: auto returns its maps and computes no signal."""
+    from svbrdf_cli.infer.physical import PhysicalModel
+
+    auto = auto_tier.AutoModel(load_model, {"ladder": [auto_tier.PHYSICAL], "steps": []}, threads=1)
+    img = _photo(4)
+    out, ref = auto(img), PhysicalModel()(img)
+    for k in cv.MAP_NAMES:
+        np.testing.assert_array_equal(out[k], ref[k])
+    assert auto.decision == {"ladder": ["physical"], "chosen": "physical", "steps": []}
+    assert not any(k.startswith("signal") for k in auto.timings) and auto.describe()["tier"] == "physical"

@@ -1,4 +1,6 @@
-"""The shipped models: complete, within the size budget, with provenance that matches the files."""
+"""The installed models: the default needs no file, every installed tier is complete, within the size
+budget, with provenance that matches the files; the auto rule covers exactly what is installed; a
+network's maps have no border seam."""
 
 import hashlib
 import json
@@ -7,13 +9,38 @@ import os
 import numpy as np
 import pytest
 
-from svbrdf_cli.infer.chain import MODELS_DIR, STAGES, Chain, installed_tiers
+from svbrdf_cli.infer.chain import MODELS_DIR, STAGES, TIERS, Chain, installed_tiers
+from svbrdf_cli.infer.registry import AUTO, DEFAULT_MODEL, load_model, model_names
 
 MB = 1_000_000
 
 
-def test_a_model_is_shipped():
-    assert "fast" in installed_tiers()
+def test_the_default_model_needs_no_file_and_only_complete_tiers_are_installed():
+    """models/ holds auto's rule and one complete folder per installed tier (nothing half-installed),
+    each with provenance that matches its files."""
+    from svbrdf_cli.infer.physical import PhysicalModel
+
+    assert DEFAULT_MODEL == "physical" and isinstance(load_model(DEFAULT_MODEL), PhysicalModel)
+    folders = sorted(f for f in os.listdir(MODELS_DIR) if os.path.isdir(os.path.join(MODELS_DIR, f))
+                     and f != "__pycache__")
+    assert folders == sorted(installed_tiers()) and set(installed_tiers()) <= set(TIERS)
+    assert os.path.isfile(os.path.join(MODELS_DIR, "auto.json"))
+    assert model_names() == [DEFAULT_MODEL, *installed_tiers(), AUTO]
+    for tier in installed_tiers():
+        folder = os.path.join(MODELS_DIR, tier)
+        with open(os.path.join(folder, "provenance.json")) as f:
+            prov = json.load(f)
+        chain = Chain(folder)
+        assert chain.stages in (STAGES, ("maps",)), tier  # the chain, or one end-to-end network
+        for stage in chain.stages:
+            name = f"{stage}.onnx"
+            with open(os.path.join(folder, name), "rb") as f:
+                assert hashlib.sha256(f.read()).hexdigest() == prov["export"]["files"][name]["sha256"], (tier, name)
+        assert set(prov["training"]["stages"]) == set(chain.stages), tier
+        for stage, rec in prov["training"]["stages"].items():
+            assert rec["steps"] > 0 and rec["seconds"] > 0 and rec["validation"], (tier, stage)
+        assert {"normal", "diffuse", "roughness", "specular"} <= set(prov["des19"]["full_chain"]), tier
+        assert chain.tier == tier and chain.files["maps.onnx"] == prov["export"]["files"]["maps.onnx"]["sha256"][:16]
 
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
@@ -21,7 +48,7 @@ BASELINES = os.path.join(ROOT, "weights", "baselines")
 
 
 def test_size_budget():
-    """Every model file under 25 MB; the shipped tiers and the committed baselines together under 60 MB."""
+    """Every model file under 25 MB; the installed tiers and the committed baselines together under 60 MB."""
     sizes = {os.path.join(d, f): os.path.getsize(os.path.join(d, f))
              for top in (MODELS_DIR, BASELINES) for d, _, files in os.walk(top) for f in files}
     assert all(s < 25 * MB for s in sizes.values()), sizes
@@ -44,49 +71,34 @@ def test_end_to_end_baseline_runs_with_its_one_stage():
     assert prov["training"]["stages"]["maps"]["variant"] == "e2e" and prov["des19"]["full_chain"]["normal"] > 0
 
 
-@pytest.mark.parametrize("tier", installed_tiers())
-def test_provenance_matches_the_files(tier):
-    folder = os.path.join(MODELS_DIR, tier)
-    with open(os.path.join(folder, "provenance.json")) as f:
-        prov = json.load(f)
-    chain = Chain(folder)
-    assert chain.stages in (STAGES, ("maps",))  # the chain, or one end-to-end network (lite)
-    for stage in chain.stages:
-        name = f"{stage}.onnx"
-        with open(os.path.join(folder, name), "rb") as f:
-            assert hashlib.sha256(f.read()).hexdigest() == prov["export"]["files"][name]["sha256"], name
-    assert set(prov["training"]["stages"]) == set(chain.stages)
-    for stage, rec in prov["training"]["stages"].items():
-        assert rec["steps"] > 0 and rec["seconds"] > 0 and rec["validation"], stage
-    assert {"normal", "diffuse", "roughness", "specular"} <= set(prov["des19"]["full_chain"])
-    assert chain.tier == tier and chain.files["maps.onnx"] == prov["export"]["files"]["maps.onnx"]["sha256"][:16]
-
-
 def test_the_auto_rule_is_shipped_calibrated_for_the_installed_tiers():
     from svbrdf_cli.infer.auto import SIGNALS, available_tiers, load_rule
 
     rule = load_rule()  # raises when a tier it steps between is missing
-    # the physical estimate first, then the networks, cheapest first
-    assert len(rule["ladder"]) >= 2 and rule["ladder"] == [t for t in available_tiers() if t in rule["ladder"]]
-    assert rule["ladder"][0] == "physical"
-    assert all(s["signal"] in SIGNALS for s in rule["steps"])
+    # every installed model, the physical estimate first, then the networks, cheapest first; a step
+    # between each rung and the next (none when the estimate is all there is)
+    assert rule["ladder"] == available_tiers() and rule["ladder"][0] == "physical"
+    assert len(rule["steps"]) == len(rule["ladder"]) - 1 and all(s["signal"] in SIGNALS for s in rule["steps"])
     cal = rule["calibration"]
     assert "seed" in cal["data"] and cal["margin"] > 0 and set(cal["tier_error"]) == set(rule["ladder"])
     assert sum(cal["tiers_taken"].values()) > 0 and all(0 < e < 1 for e in cal["tier_error"].values())
+    assert min(cal["tier_error"].values()) <= cal["auto_error"] <= max(cal["tier_error"].values())
 
 
-@pytest.mark.parametrize("tier", installed_tiers())
-def test_no_border_seam_on_a_uniform_material(tier):
+@pytest.mark.parametrize("model", ["chain_model", "swift_model", *installed_tiers()])
+def test_no_border_seam_on_a_uniform_material(model, request):
     """A flash photo of a uniform material: the maps' 4-pixel border matches the 12 pixels inside it (the
-    networks' zero padding used to leave a coloured frame on every diffuse map)."""
+    networks' zero padding used to leave a coloured frame on every diffuse map). On each kind of network
+    folder (exported for the test: per-stage networks, a swift chain) and every installed tier."""
     from svbrdf_cli import conventions as cv
     from svbrdf_cli.shading import render_maps
 
+    model = str(request.getfixturevalue(model)) if model.endswith("_model") else model  # a folder, or a tier
     h = w = 256
     maps = {"normal": np.broadcast_to(np.float32([0, 0, 1]), (h, w, 3)).copy(),
             "diffuse": np.full((h, w, 3), 0.25, np.float32) * np.float32([1.0, 0.8, 0.6]),
             "roughness": np.full((h, w, 1), 0.4, np.float32), "specular": np.full((h, w, 3), 0.04, np.float32)}
-    out = Chain(os.path.join(MODELS_DIR, tier), threads=1)(cv.image_to_encoded(render_maps(maps)).astype(np.float32))
+    out = load_model(model, threads=1)(cv.image_to_encoded(render_maps(maps)).astype(np.float32))
     for k in ("diffuse", "roughness"):
         d = out[k]
         c = d.shape[-1]

@@ -9,11 +9,9 @@ from click.testing import CliRunner
 
 from svbrdf_cli.cli.main import cli
 from svbrdf_cli.imageio import read_image, write_image
-from svbrdf_cli.infer.chain import installed_tiers
 from svbrdf_cli.infer.registry import DEFAULT_MODEL
 
 ray = pytest.importorskip("ray", reason="the scale extra (Ray) is not installed")
-pytestmark = pytest.mark.skipif("fast" not in installed_tiers(), reason="the fast model is not installed")
 
 MAPS = ("normal.png", "diffuse.png", "roughness.png", "specular.png")
 
@@ -44,10 +42,13 @@ def photos(tmp_path):
     return d
 
 
-def test_ray_engine_matches_the_local_engine(local_ray, photos, tmp_path):
-    code, out = run("batch", photos, "-o", tmp_path / "local", "--size", 320)
+@pytest.mark.parametrize("model", [DEFAULT_MODEL, "swift_model"])
+def test_ray_engine_matches_the_local_engine(local_ray, photos, tmp_path, model, request):
+    # the default model, and a network from a folder (each worker loads it)
+    model = str(request.getfixturevalue(model)) if model == "swift_model" else model
+    code, out = run("batch", photos, "-o", tmp_path / "local", "--size", 320, "--model", model)
     assert code == 1 and "4 done, 1 failed" in out
-    code, out = run("batch", photos, "-o", tmp_path / "ray", "--size", 320, "--engine", "ray")
+    code, out = run("batch", photos, "-o", tmp_path / "ray", "--size", 320, "--engine", "ray", "--model", model)
     assert code == 1 and "4 done, 1 failed" in out, out
     errors = [line for line in out.splitlines() if line.startswith("error:")]
     assert len(errors) == 1 and "shot_broken.jpg" in errors[0]
@@ -59,7 +60,8 @@ def test_ray_engine_matches_the_local_engine(local_ray, photos, tmp_path):
             b = read_image(tmp_path / "ray" / f"shot{i}" / m)
             assert np.array_equal(a, b), (i, m)
         rec = json.loads((tmp_path / "ray" / f"shot{i}" / "material.json").read_text())
-        assert rec["crop"]["mode"] == "auto" and rec["model"]["tier"] == DEFAULT_MODEL
+        assert rec["crop"]["mode"] == "auto" and rec["model"]["name"] == model
+        assert rec["model"]["tier"] == (DEFAULT_MODEL if model == DEFAULT_MODEL else "swift")
 
 
 def test_ray_engine_resumes(local_ray, photos, tmp_path):
