@@ -43,7 +43,10 @@ def _setup(threads):
     import torch
 
     torch.set_num_threads(threads)
-    torch.set_num_interop_threads(1)
+    try:
+        torch.set_num_interop_threads(1)
+    except RuntimeError:  # set once per process: a second command in the same process keeps it
+        pass
     keep_memory()
 
 
