@@ -125,8 +125,8 @@ def background(folder, schedule, restart_stage):
     env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
     with open(os.path.join(folder, "log.txt"), "a") as log:
         args = [sys.executable, "-m", "export.engine", "train", "--run", folder, "--threads", "1"]
-        args += ["--schedule", schedule] if schedule else []
-        p = subprocess.Popen(args + (["--restart-stage", restart_stage] if restart_stage else []),
+        args += (["--schedule", schedule] if schedule else []) + (["--restart-stage", restart_stage] if restart_stage else [])
+        p = subprocess.Popen(args,
                              stdout=log, stderr=log, stdin=subprocess.DEVNULL, start_new_session=True, env=env)
     with open(pid_file, "w") as f:
         f.write(str(p.pid))

@@ -35,14 +35,19 @@ def capture(photo, model, out, size=256):
     return os.path.join(out, os.path.splitext(os.path.basename(photo))[0])
 
 
-def measures(folder):
-    """(relief strength, mean roughness, roughness spread) of a written set."""
-    from svbrdf_cli.imageio import read_image
-
-    n = read_image(os.path.join(folder, "normal.png"))[..., :2].astype(np.float64) * 2 - 1
-    r = read_image(os.path.join(folder, "roughness.png")).astype(np.float64)
+def measures(maps):
+    """(relief strength, mean roughness, roughness spread) of a set's maps as read back."""
+    n = maps["normal"][..., :2].astype(np.float64) * 2 - 1
+    r = maps["roughness"].astype(np.float64)
     r = r[..., 0] if r.ndim == 3 else r
     return float(n.reshape(-1, 2).std(0).mean()), float(r.mean()), float(r.std())
+
+
+def _tile(img, cell):
+    from PIL import Image
+
+    img = np.repeat(img[..., None], 3, -1) if img.ndim == 2 else img[..., :3]
+    return Image.fromarray((np.clip(img, 0, 1) * 255).round().astype(np.uint8)).resize((cell, cell))
 
 
 def make(models, out, cell=160, log=print):
@@ -69,16 +74,13 @@ def make(models, out, cell=160, log=print):
             row = []
             for m, model in enumerate(models):
                 folder = capture(photo, model, os.path.join(tmp, str(m)))
-                row.append(measures(folder))
+                maps = {name: read_image(os.path.join(folder, name + ".png")) for name in MAPS}  # read once
+                row.append(measures(maps))
                 for k, name in enumerate(MAPS):
-                    img = read_image(os.path.join(folder, name + ".png"))
-                    img = np.repeat(img[..., None], 3, -1) if img.ndim == 2 else img[..., :3]
-                    tile = Image.fromarray((np.clip(img, 0, 1) * 255).round().astype(np.uint8)).resize((cell, cell))
-                    sheet.paste(tile, ((1 + m * len(MAPS) + k) * cell, top + i * cell))
+                    sheet.paste(_tile(maps[name], cell), ((1 + m * len(MAPS) + k) * cell, top + i * cell))
                 if m == 0:
                     shown = read_image(os.path.join(folder, "debug", "input.png"))  # the crop the model saw
-            tile = Image.fromarray((np.clip(shown[..., :3], 0, 1) * 255).round().astype(np.uint8)).resize((cell, cell))
-            sheet.paste(tile, (0, top + i * cell))
+            sheet.paste(_tile(shown, cell), (0, top + i * cell))
             name = os.path.relpath(photo, real)
             log(f"{name} | " + " | ".join(f"{a:.3f}, {b:.2f}, {c:.3f}" for a, b, c in row))
     sheet.save(out)
