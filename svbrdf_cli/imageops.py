@@ -58,6 +58,13 @@ def resize_to(image, shape):
     return cv2.resize(image, (shape[1], shape[0]), interpolation=cv2.INTER_LINEAR).reshape(*shape, image.shape[-1])
 
 
+def shrink_to(image, shape):
+    """(h, w, C) ``image`` area-filtered down to ``shape`` = (H, W) (H <= h, W <= w); returns (H, W, C)."""
+    import cv2
+
+    return cv2.resize(image, (shape[1], shape[0]), interpolation=cv2.INTER_AREA).reshape(*shape, image.shape[-1])
+
+
 def blur(image, sigma):
     """Gaussian blur of standard deviation ``sigma`` pixels, reflecting at the borders.
 

@@ -8,8 +8,9 @@ outputs ``masks`` (1, 6, H, W), ``aux`` (1, 9, H, W) and ``maps`` (1, 10, H, W):
 diffuse (3), roughness (1), specular (3) in the stored encoding. H and W are dynamic, multiples of
 32 (a depth-4 UNet at half size). fp32 throughout (the training's bf16 is for speed only); the
 graph matches torch in fp32 (``tests/export/test_engine.py``). Its metadata holds the conventions
-version, the size multiple and the run's provenance (samples seen, CPU hours, the last Des19
-scores); :class:`svbrdf_cli.infer.swift.SwiftModel` runs it.
+version, the size multiple, ``run_size`` (the image size the run trained at: the scale of flash
+spot and texture the chain learned, at which the runtime runs it) and the run's provenance (samples
+seen, CPU hours, the last Des19 scores); :class:`svbrdf_cli.infer.swift.SwiftModel` runs it.
 """
 
 from __future__ import annotations
@@ -38,8 +39,9 @@ class _Graph(nn.Module):
         return masks, aux.clamp(0.0, 1.0), torch.cat([maps[k] for k in cv.MAP_NAMES], 1)
 
 
-def export(net, path, provenance=None, size=128):
-    """Write ``net`` (eval mode, fp32) to ``path`` as ONNX."""
+def export(net, path, provenance=None, size=128, run_size=None):
+    """Write ``net`` (eval mode, fp32) to ``path`` as ONNX; ``run_size``: the training's image size,
+    recorded for the runtime (None: the runtime runs it at the size it is given)."""
     net = net.eval().float()
     x = (torch.rand(1, 3, size, size), torch.zeros(1, 4, size, size), torch.rand(1, 10, size, size))
     dyn = {k: {2: "height", 3: "width"} for k in INPUTS + OUTPUTS}
@@ -51,6 +53,8 @@ def export(net, path, provenance=None, size=128):
     model = onnx.load(path)
     meta = {"conventions": cv.CONVENTIONS_VERSION, "size_multiple": str(SIZE_MULTIPLE), "tier": "swift",
             "provenance": json.dumps(provenance or {})}
+    if run_size:
+        meta["run_size"] = str(int(run_size))
     for key, value in meta.items():
         entry = model.metadata_props.add()
         entry.key, entry.value = key, value

@@ -7,7 +7,8 @@ A run is a folder:
   written every ``checkpoint_minutes`` of wall time and when the process gets SIGTERM or SIGINT
   (it finishes the step, saves, and exits 0);
 * ``curve.jsonl``: one line per evaluation (samples seen, CPU hours, stage, the running training
-  loss, the generated validation loss of the stage, and Des19 scores of the whole chain);
+  loss, the generated validation loss of the stage, and Des19 scores of the whole chain, run at
+  the run's image size as the runtime runs it: ``des19_size``);
 * ``log.txt`` when started with ``python -m export.engine background``.
 
 Stages train in the order of ``schedule`` (the paper's: masks, then aux with the masks frozen,
@@ -29,6 +30,7 @@ import time
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 
 from export.engine import bank as bank_mod
 from export.engine import batches, flash, nets
@@ -349,7 +351,8 @@ class Run:
                  "train_loss": train_loss, "val_loss": self.validate(stage), "time": time.time()}
         des19 = self.des19 if self.des19 is not None else load_des19()
         if des19:
-            entry["des19"] = score_des19(self.net, des19)
+            entry["des19"] = score_des19(self.net, des19, self.config.size)
+            entry["des19_size"] = self.config.size
         with open(os.path.join(self.folder, "curve.jsonl"), "a") as f:
             f.write(json.dumps(entry) + "\n")
         self.log(f"eval: {json.dumps(entry)}")
@@ -470,23 +473,36 @@ def des19_geometry(n):
 
 
 @torch.no_grad()
-def predict(net, photo, camera, light):
-    """Stored maps (B, C, H, W) of the whole chain for encoded photos (B, 3, H, W)."""
+def predict(net, photo, camera, light, size=None):
+    """Stored maps (B, C, H, W) of the whole chain for encoded photos (B, 3, H, W).
+
+    ``size``: run the chain on the photo area-shrunk to ``size``² (the scale it was trained at) and
+    bring its maps back bicubically (normals renormalised), as :class:`svbrdf_cli.infer.swift.SwiftModel`
+    does; None runs it at the photo's size."""
     net.eval()
     h = photo.shape[-1]
-    context = flash.context(camera, light, h)
-    base = flash.base(photo, camera, light)
+    small = F.interpolate(photo, size=(size, size), mode="area") if size and size < h else photo
+    context = flash.context(camera, light, small.shape[-1])
+    base = flash.base(small, camera, light)
     with torch.autocast("cpu", dtype=torch.bfloat16):
-        masks, aux, maps = net(photo, context, base)
-    return {k: v.float() for k, v in maps.items()}
+        masks, aux, maps = net(small, context, base)
+    maps = {k: v.float() for k, v in maps.items()}
+    if small is not photo:
+        maps = {k: F.interpolate(v, size=photo.shape[-2:], mode="bicubic", align_corners=False).clamp(0, 1)
+                for k, v in maps.items()}
+        n = maps["normal"] * 2 - 1
+        n[:, 2:] = n[:, 2:].clamp_min(1e-3)
+        maps["normal"] = F.normalize(n, dim=1) * 0.5 + 0.5
+    return maps
 
 
-def score_des19(net, des19):
-    """The reference scorer's numbers (8-bit maps, linear albedo, adapted roughness) for the chain."""
+def score_des19(net, des19, size=None):
+    """The reference scorer's numbers (8-bit maps, linear albedo, adapted roughness) for the chain,
+    run at ``size`` (:func:`predict`)."""
     rows = {k: [] for k in ("normal", "diffuse", "roughness", "specular", "relief")}
     for name, photo, gt in des19:
         cam, light = des19_geometry(1)
-        pred = predict(net, photo, cam, light)
+        pred = predict(net, photo, cam, light, size)
         p = {k: (v[0].permute(1, 2, 0).numpy().astype(np.float64) * 255).round() / 255 for k, v in pred.items()}
         p["roughness"] = np.repeat(p["roughness"], 3, -1)
         for k in ("diffuse", "specular"):

@@ -6,9 +6,18 @@ inputs ``photo`` (1, 3, H, W) encoded, ``context`` (1, 4, H, W) and ``base`` (1,
 and ``maps`` (stored encoding, the correction of the base already applied). Its metadata holds the
 training run's provenance.
 
+**Scale.** A chain runs at the image size its run trained at (``run_size`` in its metadata, 128):
+a larger photo is area-shrunk to it and the maps come back to the photo's size bicubically, the
+normals renormalised. The chain learned the flash spot's and the texture's size in pixels at that
+scale; run on Des19 at 256 instead, the run's chain at 987k samples scored normal / diffuse /
+roughness / specular 0.0571 / 0.0489 / 0.2151 / 0.0742 (relief 0.276), at 128 0.0545 / 0.0406 /
+0.1322 / 0.0595 (relief 0.302) (``docs/training.md``). Guided upsampling of that step (the photo's
+detail added) was measured worse on diffuse (0.0445) for a relief 0.01 higher, so it is bicubic.
+
 Where the flash was comes from the physical estimate's fit of the photo (the foot of the flash and
 its height, :func:`svbrdf_cli.infer.physical.fit_flash`), as the training's flash context comes from
-the true flash moved by the error such a fit makes (``export/engine/batches.py``).
+the true flash moved by the error such a fit makes (``export/engine/batches.py``). The same fit
+takes the flash's leftover trends off the diffuse and the roughness (:func:`flatten_flash_trends`).
 """
 
 from __future__ import annotations
@@ -20,12 +29,33 @@ import time
 import numpy as np
 
 from svbrdf_cli import conventions as cv
+from svbrdf_cli.imageops import shrink_to
 from svbrdf_cli.infer import flash_fields
 from svbrdf_cli.infer.chain import ModelError, padding, session
 
 #: The file a folder holds when it is a swift chain.
 FILE = "chain.onnx"
 OUTPUTS = {"masks": ("M_b", "M_h"), "aux": ("I_bf", "I_hr", "I_hr2")}
+
+
+def flatten_flash_trends(stored, rho):
+    """The diffuse and the roughness (stored maps) with any trend in the distance ``rho`` to the
+    flash's foot divided out (:func:`svbrdf_cli.infer.physical.flatten_radial`, the physical
+    estimate's last step), their mean level kept.
+
+    Neither has a reason to change with where the flash happened to point; the chain leaves such
+    trends where it reads the highlight's surroundings differently from the rest (a pale or dark
+    spot in the diffuse, a glossier blob in the roughness, seen on real photos). Measured on Des19
+    through the capture path (the run's chain at 987k samples): diffuse RMSE 0.0444 -> 0.0403,
+    roughness 0.1222 -> 0.1200, held-out relighting 0.0617 -> 0.0582, the card's relighting
+    0.1449 -> 0.1416."""
+    from svbrdf_cli.infer.physical import flatten_radial
+
+    d = cv.albedo_to_linear(stored["diffuse"])
+    diffuse = cv.albedo_to_stored(np.clip(flatten_radial(d, rho), 0.0, 1.0))
+    r = np.repeat(stored["roughness"], 3, -1)
+    roughness = np.clip(flatten_radial(r, rho)[..., :1], 0.0, 1.0)
+    return {"diffuse": diffuse.astype(np.float32), "roughness": roughness.astype(np.float32)}
 
 
 def is_swift(folder):
@@ -52,10 +82,11 @@ class SwiftModel:
             raise ModelError(f"'{path}' takes {', '.join(sorted(names))}, not a swift chain's photo, context "
                              "and base; re-export it (python -m export.engine onnx).")
         self.multiple = int(meta.get("size_multiple", "32"))
+        self.run_size = int(meta["run_size"]) if meta.get("run_size") else None
         self.provenance = json.loads(meta.get("provenance", "{}"))
         self.tier = meta.get("tier", "swift")
         self.timings = {}
-        self.found = None
+        self.found = self.fit = None
 
     @property
     def used(self):
@@ -69,10 +100,11 @@ class SwiftModel:
                 "trained": {k: p[k] for k in ("samples", "cpu_hours", "step") if k in p}}
 
     def flash(self, image):
-        """The flash position (3,) in surface units, from the physical estimate's fit of ``image``."""
+        """The flash position (3,) in surface units, from the physical estimate's fit of ``image``
+        (kept as ``self.fit``)."""
         from svbrdf_cli.infer import physical
 
-        fit = physical.fit_flash(image)
+        fit = self.fit = physical.fit_flash(image)
         self.found = {"flash_foot": [round(fit.foot[0], 4), round(fit.foot[1], 4)],
                       "flash_height": round(fit.fit.height, 4)}
         foot = self.found["flash_foot"]
@@ -80,13 +112,28 @@ class SwiftModel:
 
     def __call__(self, image):
         """(H, W, 3) encoded photo -> the maps (stored encoding) and the masks and auxiliary
-        renderings (encoded images) for ``--debug``."""
+        renderings (encoded images) for ``--debug``: :meth:`network`'s, the flash's trends taken off
+        (:func:`flatten_flash_trends`)."""
+        out = self.network(image)
+        t0 = time.perf_counter()
+        out.update(flatten_flash_trends(out, self.fit.rho))
+        self.timings["flatten"] = time.perf_counter() - t0
+        return out
+
+    def network(self, image):
+        """The chain's own outputs for an (H, W, 3) encoded photo, at the photo's size."""
+        import cv2
+
         img = np.asarray(image, dtype=np.float32)
         if img.ndim != 3 or img.shape[-1] != 3:
             raise ValueError(f"expected an (H, W, 3) image, got shape {img.shape}")
-        h, w = img.shape[:2]
+        full = img.shape[:2]
         t0 = time.perf_counter()
-        light = self.flash(img)
+        light = self.flash(img)  # on the whole photo: surface units do not depend on the size
+        if self.run_size and max(full) > self.run_size:
+            s = self.run_size / max(full)
+            img = shrink_to(img, (max(1, round(full[0] * s)), max(1, round(full[1] * s))))
+        h, w = img.shape[:2]
         ctx = flash_fields.context(light, h, w)
         base = flash_fields.base(img, light)
         t1 = time.perf_counter()
@@ -99,13 +146,20 @@ class SwiftModel:
                                             {"photo": feed(img), "context": feed(ctx), "base": feed(base)})
         self.timings = {"physical": t1 - t0, "chain": time.perf_counter() - t1}
 
-        def crop(x):
-            return np.ascontiguousarray(x[0].transpose(1, 2, 0)[m:m + h, m:m + w])
+        def crop(x, interpolation=cv2.INTER_CUBIC):
+            x = np.ascontiguousarray(x[0].transpose(1, 2, 0)[m:m + h, m:m + w])
+            if (h, w) != full:
+                x = np.clip(cv2.resize(x, (full[1], full[0]), interpolation=interpolation), 0.0, 1.0)
+            return x
 
         maps = crop(maps)
         out = dict(zip(cv.MAP_NAMES, np.split(maps, [3, 6, 7], axis=-1)))
+        if (h, w) != full:
+            n = cv.decode_normals(out["normal"])
+            n[..., 2] = np.maximum(n[..., 2], 1e-3)  # stay in the upper hemisphere
+            out["normal"] = cv.encode_normals(cv.normalize(n)).astype(np.float32)
         for name, x in (("masks", masks), ("aux", aux)):
-            x = crop(x)
+            x = crop(x, cv2.INTER_LINEAR)
             out.update({k: x[..., 3 * i:3 * i + 3] for i, k in enumerate(OUTPUTS[name])})
         return out
 

@@ -316,7 +316,7 @@ def test_the_runtime_runs_the_exported_chain_as_torch_does(tmp_path):
     g = torch.Generator().manual_seed(3)
     photo = (0.3 + 0.4 * torch.rand(1, 3, 96, 96, generator=g)).clamp(0, 1)
     img = photo[0].permute(1, 2, 0).numpy()
-    out = model(img)
+    out = model.network(img)
     light = torch.from_numpy(model.flash(img)).float()[None]
     m, pad, mode = padding(96, 96, 32)  # the runtime's reflected margin, made here the same way
 
@@ -337,3 +337,45 @@ def test_the_runtime_runs_the_exported_chain_as_torch_does(tmp_path):
     assert res.exit_code == 0, res.output
     debug = sorted(os.listdir(tmp_path / "out" / "glazed_tiles" / "debug"))
     assert {"M_b.png", "M_h.png", "I_bf.png", "I_hr.png", "I_hr2.png"} <= set(debug), debug
+
+
+def test_the_runtime_runs_the_chain_at_the_size_it_trained_at(tmp_path):
+    """A photo larger than the run's image size is shrunk to it, and the maps come back to the photo's size."""
+    pytest.importorskip("onnxruntime")
+    import cv2
+
+    from export.engine import onnx as engine_onnx
+    from svbrdf_cli.imageops import shrink_to
+    from svbrdf_cli.infer.chain import padding
+    from svbrdf_cli.infer.registry import load_model
+
+    torch.manual_seed(0)
+    net = nets.build().eval()
+    for m in (net.aux, net.maps):
+        torch.nn.init.normal_(m.head.weight, std=0.01)
+    folder = tmp_path / "swift"
+    engine_onnx.export(net, str(folder / "chain.onnx"), provenance={}, run_size=64)
+    model = load_model(str(folder))
+    assert model.run_size == 64
+    g = torch.Generator().manual_seed(5)
+    img = (0.3 + 0.4 * torch.rand(128, 128, 3, generator=g)).numpy()
+    out = model.network(img)
+    assert all(v.shape[:2] == (128, 128) for v in out.values())
+    small = shrink_to(img, (64, 64))
+    photo = torch.from_numpy(small).permute(2, 0, 1)[None]
+    light = torch.from_numpy(model.flash(img)).float()[None]
+    m, pad, mode = padding(64, 64, 32)
+
+    def padded(x):
+        return torch.from_numpy(np.pad(x[0].permute(1, 2, 0).numpy(), pad, mode=mode)).permute(2, 0, 1)[None]
+
+    with torch.no_grad():
+        _, _, maps = net(padded(photo), padded(flash.context(light, light, 64)), padded(flash.base(photo, light, light)))
+    for k in ("diffuse", "roughness", "specular"):
+        low = maps[k][0].permute(1, 2, 0).numpy()[m:m + 64, m:m + 64]
+        want = np.clip(cv2.resize(np.ascontiguousarray(low), (128, 128), interpolation=cv2.INTER_CUBIC), 0, 1)
+        assert np.abs(out[k] - want.reshape(out[k].shape)).max() < 1e-3, k
+    n = out["normal"] * 2 - 1
+    assert np.allclose(np.linalg.norm(n, axis=-1), 1.0, atol=1e-4)
+    # the maps are the network's at 64 px: no detail finer than the shrunk photo's
+    assert np.abs(out["roughness"][::2, ::2] - out["roughness"][1::2, 1::2]).mean() < 0.02

@@ -1,0 +1,44 @@
+"""The swift chain's runtime steps that need no network: the flash's trends taken off its maps."""
+
+import numpy as np
+
+from svbrdf_cli import conventions as cv
+from svbrdf_cli.infer.swift import flatten_flash_trends
+
+
+def _rho(n=96, foot=(0.2, -0.1)):
+    y, x = np.mgrid[0:n, 0:n]
+    x, y = (x + 0.5) / n * 2 - 1, 1 - (y + 0.5) / n * 2
+    return np.sqrt((x - foot[0]) ** 2 + (y - foot[1]) ** 2)
+
+
+def _stored(diffuse, roughness):
+    n = diffuse.shape[0]
+    return {"normal": np.full((n, n, 3), 0.5, np.float32), "diffuse": cv.albedo_to_stored(diffuse).astype(np.float32),
+            "roughness": roughness.astype(np.float32), "specular": np.full((n, n, 3), 0.2, np.float32)}
+
+
+def test_a_pale_spot_and_a_glossy_blob_at_the_flash_are_taken_off_and_the_texture_kept():
+    rho = _rho()
+    g = np.random.default_rng(0)
+    texture = 0.3 * (1 + 0.2 * g.standard_normal(rho.shape))[..., None] * np.array([1.0, 0.8, 0.6])
+    spot = 1 + 0.6 * np.exp(-(rho / 0.3) ** 2)
+    blob = 0.6 - 0.3 * np.exp(-(rho / 0.4) ** 2)
+    out = flatten_flash_trends(_stored(texture * spot[..., None], blob[..., None]), rho)
+    d = cv.albedo_to_linear(out["diffuse"])
+    near, far = rho < 0.2, rho > 0.8
+    assert 0.95 < d[near].mean() / d[far].mean() < 1.05  # the spot is gone (it was 1.5x)
+    assert np.corrcoef(d[..., 0].ravel(), texture[..., 0].ravel())[0, 1] > 0.95  # the texture stays
+    r = out["roughness"][..., 0]
+    assert abs(r[near].mean() - r[far].mean()) < 0.03  # the blob is gone (it was 0.27)
+    assert out["diffuse"].dtype == out["roughness"].dtype == np.float32
+
+
+def test_maps_without_a_flash_trend_are_kept():
+    rho = _rho()
+    g = np.random.default_rng(1)
+    diffuse = (0.2 + 0.1 * g.random(rho.shape))[..., None].repeat(3, -1)
+    rough = np.full(rho.shape + (1,), 0.45)
+    out = flatten_flash_trends(_stored(diffuse, rough), rho)
+    assert np.abs(cv.albedo_to_linear(out["diffuse"]) - diffuse).max() < 0.02
+    assert np.abs(out["roughness"] - 0.45).max() < 1e-4
