@@ -222,5 +222,7 @@ def onnx(folder, out):
     provenance = {"run": folder, "step": run.step, "samples": run.samples, "cpu_hours": round(run.cpu / 3600, 3),
                   "stage": run.stage, "schedule": run.config.schedule, "bank": "export.engine.bank (procedural, CC0, mixes)",
                   "des19": last.get("des19")}
-    path = engine_onnx.export(run.net, os.path.join(out, "chain.onnx"), provenance, run_size=run.config.size)
+    provenance["weights"] = "moving average" if run.ema is not None else "as trained"
+    with run.averaged():
+        path = engine_onnx.export(run.net, os.path.join(out, "chain.onnx"), provenance, run_size=run.config.size)
     click.echo(f"{path}: {os.path.getsize(path) / 1e6:.1f} MB, {run.samples} samples")

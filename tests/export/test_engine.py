@@ -165,6 +165,42 @@ def test_a_run_stopped_and_resumed_equals_the_run_that_never_stopped(tmp_path, s
     assert not all(torch.equal(a[k], nets.build().state_dict()[k]) for k in a)  # it did train
 
 
+def test_a_finished_stage_keeps_its_averaged_weights_and_evaluation_sees_them(tmp_path, small_bank):
+    import dataclasses
+
+    avg = _run(tmp_path / "avg", small_bank)
+    raw = Run(str(tmp_path / "raw"), dataclasses.replace(avg.config, ema_decay=0.0), log=lambda m: None, des19=[])
+    avg.train(steps=2, evaluate=False)
+    raw.train(steps=2, evaluate=False)
+    trained = {k: v.clone() for k, v in avg.net.masks.named_parameters()}
+    assert all(torch.equal(trained[k], v) for k, v in raw.net.masks.named_parameters())  # the average changes no step
+    assert avg.ema is not None and raw.ema is None
+    assert not all(torch.equal(avg.ema[k], trained[k]) for k in trained)
+    with avg.averaged() as net:
+        assert all(torch.equal(avg.ema[k], p) for k, p in net.masks.named_parameters())
+    assert all(torch.equal(trained[k], p) for k, p in avg.net.masks.named_parameters())  # put back
+    before = {k: v.clone() for k, v in avg.ema.items()}
+    avg.train(steps=1, evaluate=False)  # the masks' last step: the stage ends
+    raw.train(steps=1, evaluate=False)
+    assert avg.stage == raw.stage == "aux" and avg.ema is None
+    last = dict(raw.net.masks.named_parameters())
+    for k, p in avg.net.masks.named_parameters():
+        assert torch.allclose(p, torch.lerp(before[k], last[k], 1 - avg.config.ema_decay), atol=1e-7), k
+
+
+def test_a_finished_stage_is_the_same_file_in_every_compact_checkpoint(tmp_path, small_bank):
+    run = _run(tmp_path / "run", small_bank)
+    run.train(steps=3, evaluate=False)  # the masks finished, the aux stage about to start
+    run.save_compact(str(tmp_path / "a"))
+    run.train(steps=1, evaluate=False)
+    run.save_compact(str(tmp_path / "b"))
+    files = sorted(f for f in os.listdir(tmp_path / "a") if f.startswith("part_"))
+    same = [f for f in files if os.path.isfile(tmp_path / "b" / f)
+            and (tmp_path / "a" / f).read_bytes() == (tmp_path / "b" / f).read_bytes()]
+    assert same == ["part_00.pt"], same
+    assert all(k.startswith("/model/masks.") for k in torch.load(tmp_path / "a" / "part_00.pt", weights_only=True))
+
+
 def test_a_schedule_given_on_resume_is_the_runs_from_then_on(tmp_path, small_bank):
     from click.testing import CliRunner
 
@@ -273,6 +309,7 @@ def test_a_compact_checkpoint_resumes_the_run_exactly(tmp_path, small_bank):
     resumed.train(steps=2, evaluate=False)
     a, b = full.net.state_dict(), resumed.net.state_dict()
     assert all(torch.equal(a[k], b[k]) for k in a)
+    assert full.ema is not None and all(torch.equal(full.ema[k], resumed.ema[k]) for k in full.ema)
 
 
 def test_the_exported_chain_matches_torch(tmp_path):
@@ -379,3 +416,30 @@ def test_the_runtime_runs_the_chain_at_the_size_it_trained_at(tmp_path):
     assert np.allclose(np.linalg.norm(n, axis=-1), 1.0, atol=1e-4)
     # the maps are the network's at 64 px: no detail finer than the shrunk photo's
     assert np.abs(out["roughness"][::2, ::2] - out["roughness"][1::2, 1::2]).mean() < 0.02
+
+
+def test_the_engine_exports_the_averaged_weights_and_the_run_size(tmp_path, small_bank):
+    ort = pytest.importorskip("onnxruntime")
+    pytest.importorskip("onnx")
+    from click.testing import CliRunner
+
+    from export.engine.cli import main
+
+    run = _run(tmp_path / "run", small_bank)
+    run.train(steps=2, evaluate=False)  # masks stage: their average differs from their weights
+    res = CliRunner().invoke(main, ["onnx", "--run", str(tmp_path / "run"), "--out", str(tmp_path / "out")])
+    assert res.exit_code == 0, res.output
+    sess = ort.InferenceSession(str(tmp_path / "out" / "chain.onnx"), providers=["CPUExecutionProvider"])
+    meta = sess.get_modelmeta().custom_metadata_map
+    assert meta["run_size"] == "32" and '"moving average"' in meta["provenance"]
+    photo = torch.rand(1, 3, 64, 64, generator=torch.Generator().manual_seed(1))
+    light = torch.tensor([[0.0, 0.0, 2.4]])
+    feeds = {"photo": photo, "context": flash.context(light, light, 64), "base": flash.base(photo, light, light)}
+    got = sess.run(["masks"], {k: v.numpy() for k, v in feeds.items()})[0]
+    net = run.net.eval().float()
+    with torch.no_grad():
+        with run.averaged():
+            want = net.run_masks(feeds["photo"], feeds["context"]).clamp(0, 1).numpy()
+        trained = net.run_masks(feeds["photo"], feeds["context"]).clamp(0, 1).numpy()
+    assert np.abs(got - want).max() < 1e-4
+    assert np.abs(got - trained).max() > 1e-4
