@@ -456,7 +456,7 @@ def _fill_with_detail(diffuse, bad, lum, to_albedo, blind):
     push-pull fill. A factor of the photo's relative texture (``lum / blur(lum)``) would divide that
     detail by the highlight's brightness over the diffuse's: 6 to 40 times too little under a highlight.
     Where the photo has no detail (``blind``: clipped), the detail of the diffuse just beside the clipped
-    region is moved onto it (:func:`_texture_beside`), not a smooth blot."""
+    region is moved onto it (:func:`texture_beside`), not a smooth blot."""
     if not bad.any():
         return diffuse
     import cv2
@@ -480,12 +480,12 @@ def _fill_with_detail(diffuse, bad, lum, to_albedo, blind):
     if blind.any():
         k = max(3, (w // 128) | 1)
         blind = cv2.dilate(blind.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))).astype(bool)
-        beside = _texture_beside(np.where(blind[..., None], filled, filled * factor[..., None]), blind)
+        beside = texture_beside(np.where(blind[..., None], filled, filled * factor[..., None]), blind)
         factor = np.where(blind, beside, factor)
     return (filled * np.where((filled != diffuse).any(-1), factor, 1.0)[..., None]).astype(np.float32)
 
 
-def _texture_beside(diffuse, spot):
+def texture_beside(diffuse, spot):
     """(H, W) relative texture (:func:`_relative_texture`) of ``diffuse`` just beside ``spot``, moved onto it."""
     cols = np.flatnonzero(spot.any(0))
     return np.roll(_relative_texture(luminance(diffuse)), int(cols[-1] - cols[0]) + 3, axis=1).astype(np.float32)
@@ -600,7 +600,7 @@ def estimate(image, geo=None, with_fit=False):
     diffuse = _fill_with_detail(np.clip(diffuse, 0.0, None).astype(np.float32), bad, lum, to_albedo, blind)
     spot = _residue_spot(img, diffuse)  # what the lobe did not take off at the highlight's peak (a sharper one)
     if spot.any():
-        diffuse = fill_from_surroundings(diffuse, spot, _texture_beside(diffuse, spot))
+        diffuse = fill_from_surroundings(diffuse, spot, texture_beside(diffuse, spot))
     if grey is not None and 0.02 < float(grey.mean()) < 0.98:  # the greys' own trend first (their highlight was
         diffuse = flatten_radial(diffuse, rho, weights=grey)  # taken off by the lobe's share, the rest's by colour)
     diffuse = flatten_radial(diffuse, rho)

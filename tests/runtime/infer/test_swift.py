@@ -42,3 +42,23 @@ def test_maps_without_a_flash_trend_are_kept():
     out = flatten_flash_trends(_stored(diffuse, rough), rho)
     assert np.abs(cv.albedo_to_linear(out["diffuse"]) - diffuse).max() < 0.02
     assert np.abs(out["roughness"] - 0.45).max() < 1e-4
+
+
+def test_the_diffuse_under_a_clipped_highlight_is_filled_from_around_it():
+    from svbrdf_cli.infer.swift import fill_clipped
+
+    n = 96
+    rho = _rho(n, foot=(0.0, 0.0))
+    g = np.random.default_rng(2)
+    albedo = (0.25 * (1 + 0.1 * g.standard_normal((n, n))))[..., None] * np.array([0.9, 0.7, 0.5])
+    hole = rho < 0.15
+    diffuse = np.where(hole[..., None], 0.05, albedo)  # a dark disc where the photo was white
+    photo = np.where(hole[..., None], 1.0, 0.5 * np.ones((n, n, 3)))
+    out = cv.albedo_to_linear(fill_clipped(cv.albedo_to_stored(diffuse).astype(np.float32), photo))
+    assert 0.8 < out[hole].mean() / albedo[hole].mean() < 1.25  # filled at its surroundings' level
+    assert out[hole].std(0).mean() > 0.3 * albedo[hole].std(0).mean()  # with texture, not a blot
+    far = rho > 0.4
+    assert np.abs(out[far] - albedo[far]).max() < 1e-2  # the rest is kept
+    unclipped = np.full((n, n, 3), 0.5)
+    same = fill_clipped(cv.albedo_to_stored(diffuse).astype(np.float32), unclipped)
+    assert np.array_equal(same, cv.albedo_to_stored(diffuse).astype(np.float32))
