@@ -1,9 +1,10 @@
 """``docs/figures/learning_curve.png``: a run's ``curve.jsonl`` against samples seen and CPU hours.
 
 Top row: the Des19 scores of the whole chain (normal and relief, diffuse, roughness, specular; the
-corrected scorer's numbers, :func:`export.engine.run.score_des19`) against samples seen, with the
-physical estimate's and the paper's levels as lines; bottom: each stage's generated validation loss
-against CPU hours.
+corrected scorer's numbers, :func:`export.engine.run.score_des19`) against samples seen, run at
+256² (the evaluations before ``des19_size`` was recorded) and at the run's size (as the runtime runs
+it), with the default's and the paper's levels as lines; bottom: each stage's generated validation
+loss against CPU hours, and the card's relighting error (:func:`export.engine.run.score_card`).
 
     python -m export.engine curve --run runs/swift --out docs/figures/learning_curve.png
 """
@@ -13,7 +14,8 @@ from __future__ import annotations
 import json
 
 #: Des19 with the corrected scorer: the default (physical estimate + --refine) and the paper.
-REFERENCE = {"default": {"normal": 0.0587, "relief": 0.093, "diffuse": 0.0394, "roughness": 0.1936, "specular": 0.0608},
+REFERENCE = {"default": {"normal": 0.0588, "relief": 0.099, "diffuse": 0.0396, "roughness": 0.1935, "specular": 0.0595,
+                         "card": 0.1305},
              "paper": {"normal": 0.0387, "relief": 0.603, "diffuse": 0.0174, "roughness": 0.0715, "specular": 0.0214}}
 
 
@@ -32,7 +34,10 @@ def plot(entries, out):
     names = ("normal", "relief", "diffuse", "roughness", "specular")
     scored = [e for e in entries if e.get("des19")]
     for ax, k in zip(axes[0], names):
-        ax.plot([e["samples"] / 1e3 for e in scored], [e["des19"][k] for e in scored], "o-", ms=3, label="swift chain")
+        for label, pts in (("chain at 256²", [e for e in scored if not e.get("des19_size")]),
+                           ("chain at its size", [e for e in scored if e.get("des19_size")])):
+            if pts:
+                ax.plot([e["samples"] / 1e3 for e in pts], [e["des19"][k] for e in pts], "o-", ms=3, label=label)
         for ref, style in (("default", "--"), ("paper", ":")):
             ax.axhline(REFERENCE[ref][k], ls=style, c="grey", label=f"{ref} {REFERENCE[ref][k]}")
         ax.set_title(f"Des19 {k}")
@@ -52,6 +57,15 @@ def plot(entries, out):
         ax.plot([e["cpu_hours"] for e in tr], [e["train_loss"] for e in tr], "x--", ms=3, label="training (running)")
         ax.set_title(f"stage {s}: loss")
         ax.set_xlabel("CPU hours (one core)")
+        ax.legend(fontsize=7)
+    card = [e for e in entries if e.get("card")]
+    if card:
+        ax = axes[1][-1]
+        ax.axis("on")
+        ax.plot([e["samples"] / 1e3 for e in card], [e["card"] for e in card], "o-", ms=3, label="chain, as captured")
+        ax.axhline(REFERENCE["default"]["card"], ls="--", c="grey", label=f"default {REFERENCE['default']['card']}")
+        ax.set_title("card_blue_9lights relighting")
+        ax.set_xlabel("samples seen (thousands)")
         ax.legend(fontsize=7)
     last = entries[-1] if entries else {"samples": 0, "cpu_hours": 0}
     fig.suptitle(f"swift chain: {last['samples']} samples, {last['cpu_hours']:.2f} CPU hours")

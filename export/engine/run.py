@@ -180,6 +180,7 @@ class Run:
         self.bank = None
         self.real = None
         self.des19 = des19
+        self.card = None
         self.stop_requested = False
 
     # -- state --------------------------------------------------------------------------------
@@ -408,6 +409,10 @@ class Run:
             if des19:
                 entry["des19"] = score_des19(self.net, des19, self.config.size)
                 entry["des19_size"] = self.config.size
+            if self.card is None:
+                self.card = (load_card() if self.des19 is None else None) or False
+            if self.card:
+                entry["card"] = score_card(self.net, self.card, self.config.size)
         with open(os.path.join(self.folder, "curve.jsonl"), "a") as f:
             f.write(json.dumps(entry) + "\n")
         self.log(f"eval: {json.dumps(entry)}")
@@ -557,6 +562,42 @@ def predict(net, photo, camera, light, size=None):
         n[:, 2:] = n[:, 2:].clamp_min(1e-3)
         maps["normal"] = F.normalize(n, dim=1) * 0.5 + 0.5
     return maps
+
+
+def runtime_twin(net, size):
+    """``net`` as :class:`svbrdf_cli.infer.swift.SwiftModel` runs an export of it, on photos of any size
+    (flash fit, the network at ``size``, the physical steps after it), torch in place of onnxruntime."""
+    from svbrdf_cli.infer.swift import SwiftModel
+
+    class Twin(SwiftModel):
+        def __init__(self):  # what SwiftModel reads from an export's metadata
+            self.multiple, self.run_size, self.timings, self.found, self.fit = 32, size, {}, None, None
+
+        @torch.no_grad()
+        def forward(self, feeds):
+            net.eval()
+            with torch.autocast("cpu", dtype=torch.bfloat16):
+                masks, aux, maps = net(*(torch.from_numpy(feeds[k]) for k in ("photo", "context", "base")))
+            return (masks.float().numpy(), aux.float().clamp(0, 1).numpy(),
+                    torch.cat([maps[k].float() for k in cv.MAP_NAMES], 1).numpy())
+
+    return Twin()
+
+
+def load_card():
+    """``card_blue_9lights`` (:class:`export.studies.benchmark.NineLights`), or None without the shared data."""
+    from export.files import shared_data
+    from export.studies.benchmark import NineLights
+
+    folder = os.path.join(shared_data(), "real", "card_blue_9lights")
+    return NineLights(folder) if os.path.isdir(folder) else None
+
+
+def score_card(net, card, size):
+    """The card's relighting error of the chain's maps from photo 00 as ``svbrdf capture`` makes them
+    (:func:`runtime_twin`), lit as the 8 other photos were."""
+    out = runtime_twin(net, size)(card.network_input())
+    return round(card.relight_rmse({k: out[k] for k in cv.MAP_NAMES}), 4)
 
 
 def score_des19(net, des19, size=None):

@@ -151,6 +151,10 @@ class SwiftModel:
         self.timings["physics"] = time.perf_counter() - t0
         return out
 
+    def forward(self, feeds):
+        """The graph's ``masks``, ``aux`` and ``maps`` (numpy, (1, C, H, W)) for its three inputs."""
+        return self.session.run(["masks", "aux", "maps"], feeds)
+
     def network(self, image):
         """The chain's own outputs for an (H, W, 3) encoded photo, at the photo's size."""
         import cv2
@@ -173,8 +177,7 @@ class SwiftModel:
         def feed(x):
             return np.ascontiguousarray(np.pad(x, pad, mode=mode).transpose(2, 0, 1)[None], dtype=np.float32)
 
-        masks, aux, maps = self.session.run(["masks", "aux", "maps"],
-                                            {"photo": feed(img), "context": feed(ctx), "base": feed(base)})
+        masks, aux, maps = self.forward({"photo": feed(img), "context": feed(ctx), "base": feed(base)})
         self.timings = {"physical": t1 - t0, "chain": time.perf_counter() - t1}
 
         def crop(x, interpolation=cv2.INTER_CUBIC):

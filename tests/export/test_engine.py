@@ -443,3 +443,25 @@ def test_the_engine_exports_the_averaged_weights_and_the_run_size(tmp_path, smal
         trained = net.run_masks(feeds["photo"], feeds["context"]).clamp(0, 1).numpy()
     assert np.abs(got - want).max() < 1e-4
     assert np.abs(got - trained).max() > 1e-4
+
+
+def test_the_runs_twin_of_the_runtime_gives_the_exported_chains_maps(tmp_path):
+    """What the run scores the card with (:func:`export.engine.run.runtime_twin`) is what ``svbrdf capture`` runs."""
+    pytest.importorskip("onnxruntime")
+    from export.engine import onnx as engine_onnx
+    from export.engine.run import runtime_twin
+    from svbrdf_cli.infer.registry import load_model
+
+    torch.manual_seed(0)
+    net = nets.build().eval()
+    for m in (net.aux, net.maps):
+        torch.nn.init.normal_(m.head.weight, std=0.01)
+    engine_onnx.export(net, str(tmp_path / "swift" / "chain.onnx"), provenance={}, run_size=64)
+    g = torch.Generator().manual_seed(7)
+    img = (0.2 + 0.5 * torch.rand(128, 128, 3, generator=g)).numpy()
+    img[50:60, 60:70] = 1.0  # a clipped highlight: the fill runs too
+    want = load_model(str(tmp_path / "swift"))(img)
+    got = runtime_twin(net, 64)(img)
+    for k in cv.MAP_NAMES:
+        assert got[k].shape == want[k].shape
+        assert np.abs(got[k] - want[k]).mean() < 5e-3, k  # bf16 against fp32
