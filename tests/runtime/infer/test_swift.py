@@ -59,6 +59,9 @@ def test_the_diffuse_under_a_clipped_highlight_is_filled_from_around_it():
     assert out[hole].std(0).mean() > 0.3 * albedo[hole].std(0).mean()  # with texture, not a blot
     far = rho > 0.4
     assert np.abs(out[far] - albedo[far]).max() < 1e-2  # the rest is kept
-    unclipped = np.full((n, n, 3), 0.5)
+    photo = np.where(hole[..., None], 1.0, 0.3 + 0.3 * g.random((n, n, 3)))
+    darkened = cv.albedo_to_linear(fill_clipped(cv.albedo_to_stored(diffuse).astype(np.float32), photo * 0.6))
+    assert 0.8 < darkened[hole].mean() / albedo[hole].mean() < 1.25  # clipped, then darkened by the exposure
+    unclipped = 0.3 + 0.3 * g.random((n, n, 3))
     same = fill_clipped(cv.albedo_to_stored(diffuse).astype(np.float32), unclipped)
     assert np.array_equal(same, cv.albedo_to_stored(diffuse).astype(np.float32))
