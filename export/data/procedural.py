@@ -808,6 +808,49 @@ def ground(g, batch, size, device, dtype=torch.float32):
     return _out(height, diffuse, roughness, c.spec(0.03, 0.05), c.p(0.03, 0.1))
 
 
+def printed(g, batch, size, device, dtype=torch.float32):
+    """Prints and dyed patterns on a flat or finely textured ground: gingham, stripes, plaid, dots,
+    blotches. The pattern is colour (and a little gloss) only, never relief: what teaches the chain
+    that a colour edge is not a ridge (it turned a gingham's checks into ridges)."""
+    c = _Ctx(g, batch, size, device, dtype)
+    # the ground: a fine weave, a paper's fibres, a smooth plastic or board
+    ground = c.p(0, 3)
+    x, y = c.rot(PI / 2, snap=PI / 2, jitter=0.03)
+    n = c.p(30, 90, log=True)
+    weave = torch.sin(PI * x * n).abs() * torch.sin(PI * y * n).abs()
+    fibres = c.fbm(x * 60, y * 60, 3)
+    height = torch.where(ground < 1, 0.5 + 0.4 * weave + 0.05 * fibres,
+                         torch.where(ground < 2, 0.5 + 0.15 * fibres, 0.5 + 0.03 * c.fbm(x * 4, y * 4, 3)))
+    depth = torch.where(ground < 1, c.p(0.002, 0.008), torch.where(ground < 2, c.p(0.002, 0.006), c.p(0.0005, 0.003)))
+    # the pattern: levels 0, 0.5 and 1 of up to three colours
+    kind = c.p(0, 5)
+    px, py = c.rot(PI / 2, snap=PI / 4, jitter=0.05)
+    f = c.p(2.0, 12.0, log=True)
+    duty = c.p(0.3, 0.7)
+    bands_x = (torch.remainder(px * f, 2.0) < 2.0 * duty).to(dtype)
+    bands_y = (torch.remainder(py * f, 2.0) < 2.0 * duty).to(dtype)
+    gingham = 0.5 * (bands_x + bands_y)
+    plaid = noise_fields.normalize01(torch.sin(px * f * PI) + 0.6 * torch.sin(px * f * 2.7 * PI + 1.0)
+                                     + torch.sin(py * f * PI) + 0.6 * torch.sin(py * f * 2.3 * PI + 2.0))
+    plaid = torch.round(plaid * 2.0) / 2.0
+    du, dv = torch.remainder(px * f, 1.0) - 0.5, torch.remainder(py * f, 1.0) - 0.5
+    dots = (du * du + dv * dv < c.p(0.02, 0.12)).to(dtype)
+    blotch = (c.fbm(x * f * 0.7, y * f * 0.7, 4) > c.p(-0.2, 0.3)).to(dtype)
+    pattern = torch.where(kind < 1, gingham, torch.where(kind < 2, bands_x, torch.where(
+        kind < 3, plaid, torch.where(kind < 4, dots, blotch))))
+    dark, light = c.hsv((0, 1), (0.0, 0.9), (0.03, 0.35)), c.hsv((0, 1), (0.0, 0.9), (0.45, 0.9))
+    swap = c.flag(0.5) > 0
+    a, b = torch.where(swap, light, dark), torch.where(swap, dark, light)  # the contrast of a print that shows
+    mid = torch.where(c.flag(0.5) > 0, 0.5 * (a + b) * c.p(0.7, 1.1), c.hsv((0, 1), (0.0, 0.9), (0.05, 0.9)))
+    colour = torch.where(pattern < 0.25, a, torch.where(pattern < 0.75, mid, b))
+    shade = torch.where(ground < 1, 0.75 + 0.25 * weave, torch.ones_like(weave))  # a weave's thread shading
+    diffuse = colour * shade * torch.exp(0.05 * fibres)
+    base_r = torch.where(ground < 1, c.p(0.6, 1.0), torch.where(ground < 2, c.p(0.5, 0.95), c.p(0.15, 0.7)))
+    roughness = base_r + c.p(-0.1, 0.1) * pattern + 0.03 * fibres  # an ink a little glossier or duller
+    diffuse, roughness = _grime(c, height, diffuse, roughness, c.p(0.0, 0.2), 0.02)
+    return _out(height, diffuse, roughness, c.spec(0.03, 0.05), depth)
+
+
 #: name -> family function ``fn(g, batch, size, device, dtype) -> dict``.
 FAMILIES: dict[str, Callable] = {
     "tiles": tiles,
@@ -829,6 +872,10 @@ FAMILIES: dict[str, Callable] = {
     "bark": bark,
     "ground": ground,
 }
+
+#: Families drawn only when named (``families=``): the bank's print shards (``export/engine/bank.py``).
+#: Kept out of :data:`FAMILIES` so that a default draw is the same as before they existed.
+EXTRA_FAMILIES: dict[str, Callable] = {"printed": printed}
 
 #: Families whose materials are metals (diffuse ~ 0, coloured F0 >= 0.5).
 METAL_FAMILIES = ("brushed_metal", "metal_plate", "tread_plate", "scratched_metal")
@@ -895,10 +942,11 @@ def generate(family, generator, batch, size, device=None, dtype=torch.float32):
         ``diffuse``, ``roughness``, ``specular`` (linear, see the module
         docstring) and ``depth`` (B,).
     """
-    if family not in FAMILIES:
-        raise KeyError(f"unknown material family {family!r}; known: {sorted(FAMILIES)}")
+    known = {**FAMILIES, **EXTRA_FAMILIES}
+    if family not in known:
+        raise KeyError(f"unknown material family {family!r}; known: {sorted(known)}")
     device = generator.device if device is None else torch.device(device)
-    raw = FAMILIES[family](generator, batch, size, device, dtype)
+    raw = known[family](generator, batch, size, device, dtype)
     shape = (batch, 1, size, size)
     height = raw["height"].expand(shape).clamp(0.0, 1.0)
     depth = raw.get("depth", DEFAULT_DEPTH)
@@ -936,7 +984,7 @@ def random_materials(generator, batch, size, device=None, families=None, dtype=t
     if not names:
         raise ValueError("families is empty")
     for n in names:
-        if n not in FAMILIES:
+        if n not in FAMILIES and n not in EXTRA_FAMILIES:
             raise KeyError(f"unknown material family {n!r}")
     device = generator.device if device is None else torch.device(device)
     if metal_fraction is None:

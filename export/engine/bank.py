@@ -44,6 +44,9 @@ CC0_CROPS = 8
 #: Mixes blend two materials of the first this many shards (a fixed set: a bank grown in several
 #: sittings is the bank grown at once).
 MIX_SOURCE_SHARDS = 32
+#: Shards of prints and dyed patterns (:func:`export.data.procedural.printed`: colour edges without
+#: relief), appended after the first 8000 materials so that a bank grown before them keeps its shards.
+PRINT_SHARDS = range(125, 135)
 #: Probability that a procedural material is a metal (real captures: about 12 % metals, with the CC0 sets).
 METAL_FRACTION = 0.08
 
@@ -173,14 +176,19 @@ def grow(root=None, target=8000, seed=0, shared=None, progress=print):
         g = torch.Generator().manual_seed(seed * 1_000_003 + index)
         u = float(torch.rand(1, generator=g))
         kind = "procedural"
-        if u < CC0_FRACTION:
+        if index in PRINT_SHARDS:
+            kind = "print"
+        elif u < CC0_FRACTION:
             if cc0_source is None:
                 cc0_source = _Cc0Source(shared)
             kind = "cc0" if cc0_source else "procedural"
         elif u < CC0_FRACTION + MIX_FRACTION and index >= MIX_SOURCE_SHARDS:
             kind = "mix"
         drawn = None
-        if kind == "cc0":
+        if kind == "print":
+            m = procedural.random_materials(g, SHARD, SIZE, device="cpu", families=["printed"])
+            drawn = {k: m[k] for k in cv.MAP_NAMES}, [f"print:{f}" for f in m["family"]]
+        elif kind == "cc0":
             drawn = cc0_source.draw(g, SHARD)
         elif kind == "mix":
             mix_bank = mix_bank or Bank(root, limit_shards=MIX_SOURCE_SHARDS)

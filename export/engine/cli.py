@@ -64,7 +64,11 @@ def _setup(threads):
 @click.option("--restart-stage", type=click.Choice(["masks", "aux", "maps"]), default=None,
               help="Train this stage (and those after it) again from its start under the current loss "
                    "settings; the earlier stages and the run's counters are kept.")
-def train(folder, threads, steps, minutes, checkpoint_minutes, eval_minutes, checkpoint, schedule, restart_stage):
+@click.option("--bank-count", type=int, default=None,
+              help="Grow the material bank to this many materials and train on them from now on "
+                   "(default: the run's own).")
+def train(folder, threads, steps, minutes, checkpoint_minutes, eval_minutes, checkpoint, schedule, restart_stage,
+          bank_count):
     """Train the swift chain in FOLDER, or resume it; SIGTERM/SIGINT save and exit 0."""
     import dataclasses
 
@@ -73,8 +77,8 @@ def train(folder, threads, steps, minutes, checkpoint_minutes, eval_minutes, che
     _setup(threads)
     config = dataclasses.replace(RunConfig(), schedule=schedule) if schedule else None
     run = Run(folder, config=config, log=lambda m: click.echo(m, err=True), checkpoint=checkpoint)
-    changes = {k: v for k, v in (("checkpoint_minutes", checkpoint_minutes), ("eval_minutes", eval_minutes))
-               if v is not None}
+    changes = {k: v for k, v in (("checkpoint_minutes", checkpoint_minutes), ("eval_minutes", eval_minutes),
+                                 ("bank_count", bank_count)) if v is not None}
     if changes:
         run.config = dataclasses.replace(run.config, **changes)
     if restart_stage:
@@ -107,7 +111,8 @@ def _schedule(text):
               help="Passed to train: samples per stage (default: the run's own).")
 @click.option("--restart-stage", type=click.Choice(["masks", "aux", "maps"]), default=None,
               help="Passed to train (once: a later resume goes on from the restarted stage).")
-def background(folder, schedule, restart_stage):
+@click.option("--bank-count", type=int, default=None, help="Passed to train: the bank's size from now on.")
+def background(folder, schedule, restart_stage, bank_count):
     """Resume (or start) the run in FOLDER detached, on one core; its log is FOLDER/log.txt."""
     import os
     import subprocess
@@ -126,6 +131,7 @@ def background(folder, schedule, restart_stage):
     with open(os.path.join(folder, "log.txt"), "a") as log:
         args = [sys.executable, "-m", "export.engine", "train", "--run", folder, "--threads", "1"]
         args += (["--schedule", schedule] if schedule else []) + (["--restart-stage", restart_stage] if restart_stage else [])
+        args += ["--bank-count", str(bank_count)] if bank_count else []
         p = subprocess.Popen(args,
                              stdout=log, stderr=log, stdin=subprocess.DEVNULL, start_new_session=True, env=env)
     with open(pid_file, "w") as f:

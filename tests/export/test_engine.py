@@ -58,6 +58,39 @@ def test_bank_grows_the_same_in_two_sittings(tmp_path, small_bank):
         assert torch.equal(a.arrays[k], b.arrays[k]), k
 
 
+def test_a_bank_grown_past_its_print_shards_holds_prints_and_keeps_its_earlier_shards(tmp_path, small_bank,
+                                                                                      monkeypatch):
+    from click.testing import CliRunner
+
+    from export.engine.cli import main
+
+    monkeypatch.setattr(bank_mod, "PRINT_SHARDS", range(2, 3))
+    root = str(tmp_path / "bank")
+    bank_mod.grow(root, 3 * bank_mod.SHARD, progress=None)
+    shards = bank_mod.read_manifest(root)["shards"]
+    assert [s["kind"] for s in shards][2] == "print" and all(x.startswith("print:") for x in shards[2]["sources"])
+    before, bank = bank_mod.Bank(small_bank), bank_mod.Bank(root)
+    for k in before.arrays:  # the first shards are those of a bank grown before the prints
+        assert torch.equal(before.arrays[k], bank.arrays[k][:len(before)]), k
+    prints = bank.maps(torch.arange(2 * bank_mod.SHARD, 3 * bank_mod.SHARD))
+    tilt = prints["normal"][:, :2].norm(dim=1).mean((1, 2))
+    spread = prints["diffuse"].std((2, 3)).mean(1)
+    assert float(tilt.max()) < 0.12 and float(spread.median()) > 0.03  # colour patterns, next to no relief
+    # a run takes a larger bank from the command line, and keeps it
+    import shutil
+
+    own = str(tmp_path / "own")
+    shutil.copytree(small_bank, own)
+    run = _run(tmp_path / "run", own)
+    run.train(steps=1, evaluate=False)
+    del run
+    res = CliRunner().invoke(main, ["train", "--run", str(tmp_path / "run"), "--steps", "1", "--checkpoint", "",
+                                    "--bank-count", str(3 * bank_mod.SHARD)])
+    assert res.exit_code == 0, res.output
+    assert Run(str(tmp_path / "run"), log=lambda m: None, des19=[]).config.bank_count == 3 * bank_mod.SHARD
+    assert bank_mod.read_manifest(own)["shards"][2]["kind"] == "print"
+
+
 def test_a_batch_has_what_each_stage_needs(small_bank):
     bank = bank_mod.Bank(small_bank)
     g = torch.Generator().manual_seed(0)

@@ -160,3 +160,16 @@ def test_noise_primitives():
     assert float(hx["edge"].max()) <= 0.5 + 1e-6 and float(hx["edge"].min()) >= -1e-6
     rgb = noise.hsv_to_rgb(torch.tensor([0.0, 1 / 3, 2 / 3]).reshape(3, 1), torch.ones(3, 1), torch.ones(3, 1))
     assert torch.allclose(rgb, torch.eye(3), atol=1e-6)
+
+
+def test_prints_are_colour_without_relief_and_stay_out_of_the_default_draw():
+    from export.data import procedural
+
+    assert "printed" not in procedural.FAMILIES and "printed" in procedural.EXTRA_FAMILIES
+    g = torch.Generator().manual_seed(3)
+    m = procedural.generate("printed", g, 6, 128)
+    tilt = m["normal"][:, :2].norm(dim=1).mean((1, 2))
+    assert float(tilt.max()) < 0.12
+    assert float(m["diffuse"].std((2, 3)).mean(1).min()) > 0.01  # every one has a pattern
+    mixed = procedural.random_materials(torch.Generator().manual_seed(0), 32, 32)
+    assert "printed" not in mixed["family"]
