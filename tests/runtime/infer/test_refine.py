@@ -270,6 +270,30 @@ def test_the_radial_trend_is_taken_out_and_the_rest_kept():
     assert float(np.abs(out - disc.mean() - 0.02 - stripes).mean()) < 0.015  # the stripes are still there
 
 
+def test_a_dark_patterns_change_is_not_read_as_a_trend_of_the_diffuse():
+    # black spots (albedo 0.003) in the outer rings only, white plaster (0.04) elsewhere; the fit's log change
+    # is -1.1 on the spots and -0.16 on the plaster (the spotted plaster of tests/runtime/cli/test_artist.py)
+    side = 64
+    radial = refine._radial(side, (0.0, 0.0))
+    rho = radial[0]
+    rng = np.random.default_rng(0)
+    spots = (rho > 0.6) & (rng.uniform(size=rho.shape) < 0.25)
+    albedo = np.repeat(np.where(spots, 0.003, 0.04)[..., None], 3, -1).astype(np.float32)
+    change = np.repeat(np.where(spots, -1.1, -0.16)[..., None], 3, -1).astype(np.float32)
+    plaster = ~spots
+
+    def lift(out):  # the plaster's change in the spotted rings over its change at the centre
+        return float(out[plaster & (rho > 0.6), 0].mean() - out[rho < 0.4, 0].mean())
+
+    assert lift(refine._without_radial_trend(change, radial)) > 0.15  # equal weights: a disc in the plaster
+    out = refine._without_radial_trend(change, radial, refine._radial_weight("diffuse", {"diffuse": np.log(albedo)}))
+    assert abs(lift(out)) < 0.03
+    # a trend alike on every pixel (vignetting) goes with the weights as without them
+    vignetting = (change - 0.2 * rho[..., None] ** 2).astype(np.float32)
+    out = refine._without_radial_trend(vignetting, radial, np.exp(np.log(albedo)))
+    assert abs(lift(out)) < 0.03
+
+
 def test_refinement_leaves_no_disc_in_roughness_round_the_highlight():
     light = (0.1, 0.0, 2.4)
     photo, truth = _photo(light, camera=light, roughness=0.2, seed=7)
