@@ -2,6 +2,7 @@
 
     python -m export.studies.artist_check                 # the 12 real benchmark photos and paper_real (~4 min)
     python -m export.studies.artist_check --keep /tmp/sets   # also keep the glTF sets to look at
+    python -m export.studies.artist_check --model EXPORT     # another model than the default (a folder)
 
 Every photo goes through ``svbrdf capture`` with its default options and ``--preset gltf`` (in process:
 :func:`svbrdf_cli.run.pipeline.prepare` and :func:`svbrdf_cli.run.pipeline.capture`), and the written files are
@@ -129,15 +130,17 @@ def measure(folder, image):
             "relief": float(widths.max() - widths.min()), "height_trend": height_trend(height, spot)}
 
 
-def run(names=None, keep=None, log=print):
-    """Capture every photo (glTF preset, default options) and measure it; returns [(name, row)]."""
+def run(names=None, keep=None, log=print, model_name=None):
+    """Capture every photo (glTF preset, default options; ``model_name``: what ``--model`` takes, the
+    default when None) and measure it; returns [(name, row)]."""
     from svbrdf_cli.imageops import resize
     from svbrdf_cli.infer.registry import DEFAULT_MODEL, load_model
     from svbrdf_cli.ingest import photo as ingest
     from svbrdf_cli.run import pipeline
 
     opts = pipeline.Options(preset="gltf")
-    model = load_model(DEFAULT_MODEL)
+    model_name = model_name or DEFAULT_MODEL
+    model = load_model(model_name)
     out_root = keep or tempfile.mkdtemp(prefix="svbrdf-artist-")
     rows = []
     try:
@@ -147,7 +150,7 @@ def run(names=None, keep=None, log=print):
             prepared = pipeline.prepare(path, opts)
             out = os.path.join(out_root, os.path.dirname(name).replace(os.sep, "_") or "photo")
             os.makedirs(out, exist_ok=True)
-            folder, record = pipeline.capture(prepared, model, out, opts, DEFAULT_MODEL)
+            folder, record = pipeline.capture(prepared, model, out, opts, model_name)
             side = record["size"]
             image = ingest.encode_for_network(resize(prepared.crop.image, side), np.float32(2.0 ** prepared.gain_ev),
                                               fast=True)
@@ -182,9 +185,10 @@ def table(rows):
 @click.command()
 @click.option("--photo", "names", multiple=True, help="Only photos whose name holds this (repeatable).")
 @click.option("--keep", type=click.Path(file_okay=False), default=None, help="Keep the glTF sets in this folder.")
-def cli(names, keep):
+@click.option("--model", "model_name", default=None, help="What `svbrdf capture --model` takes (default: its default).")
+def cli(names, keep, model_name):
     """Capture the real photos with the glTF preset and measure what an artist would reject."""
-    rows = run(names, keep, log=click.echo)
+    rows = run(names, keep, log=click.echo, model_name=model_name)
     click.echo(table(rows))
 
 
