@@ -121,6 +121,18 @@ def test_relief_scale_keeps_the_direction_and_changes_the_depth(small_bank):
     assert torch.equal(a, b)
 
 
+def test_gloss_scale_makes_a_material_glossier_and_keeps_its_pattern(small_bank):
+    bank = bank_mod.Bank(small_bank)
+    rough = bank.maps(torch.arange(8))["roughness"]
+    out = batches.gloss_scale(rough, torch.Generator().manual_seed(2))
+    k = out.mean((1, 2, 3)) / rough.mean((1, 2, 3))
+    assert (k >= batches.GLOSS_SCALE[0] - 1e-6).all() and (k <= batches.GLOSS_SCALE[1] + 1e-6).all()
+    assert float(k.std()) > 0.01  # one factor per sample, not one for all
+    assert torch.allclose(out, rough * k.reshape(-1, 1, 1, 1), atol=1e-6)  # the pattern kept
+    made = batches.materials(bank, torch.Generator().manual_seed(3), 16, 32)
+    assert float(made["roughness"].min()) >= 0.02 and float(made["roughness"].max()) <= 1.0
+
+
 def test_fast_highlight_removed_matches_the_reference(small_bank):
     bank = bank_mod.Bank(small_bank)
     g = torch.Generator().manual_seed(3)
