@@ -63,6 +63,10 @@ def plot(entries, out):
         ax = axes[1][-1]
         ax.axis("on")
         ax.plot([e["samples"] / 1e3 for e in card], [e["card"] for e in card], "o-", ms=3, label="chain, as captured")
+        refined = [e for e in card if e.get("card_refined")]
+        if refined:
+            ax.plot([e["samples"] / 1e3 for e in refined], [e["card_refined"] for e in refined], "s-", ms=3,
+                    label="chain + --refine 60")
         ax.axhline(REFERENCE["default"]["card"], ls="--", c="grey", label=f"default {REFERENCE['default']['card']}")
         ax.set_title("card_blue_9lights relighting")
         ax.set_xlabel("samples seen (thousands)")

@@ -38,6 +38,7 @@ from export.engine import batches, flash, nets
 from export.engine import real as real_mod
 from export.files import atomic_torch_save
 from svbrdf_cli import conventions as cv
+from svbrdf_cli.infer.refine import DEFAULT_ITERATIONS
 
 AUX_NAMES = ("I_bf", "I_hr", "I_hr2")
 
@@ -414,6 +415,7 @@ class Run:
                 self.card = (load_card() if self.des19 is None else None) or False
             if self.card:
                 entry["card"] = score_card(self.net, self.card, self.config.size)
+                entry["card_refined"] = score_card(self.net, self.card, self.config.size, DEFAULT_ITERATIONS)
         with open(os.path.join(self.folder, "curve.jsonl"), "a") as f:
             f.write(json.dumps(entry) + "\n")
         self.log(f"eval: {json.dumps(entry)}")
@@ -594,11 +596,19 @@ def load_card():
     return NineLights(folder) if os.path.isdir(folder) else None
 
 
-def score_card(net, card, size):
+def score_card(net, card, size, refine_steps=0):
     """The card's relighting error of the chain's maps from photo 00 as ``svbrdf capture`` makes them
-    (:func:`runtime_twin`), lit as the 8 other photos were."""
-    out = runtime_twin(net, size)(card.network_input())
-    return round(card.relight_rmse({k: out[k] for k in cv.MAP_NAMES}), 4)
+    (:func:`runtime_twin`; then ``--refine refine_steps`` when not 0), lit as the 8 other photos were."""
+    twin = runtime_twin(net, size)
+    image = card.network_input()
+    out = twin(image)
+    maps = {k: out[k] for k in cv.MAP_NAMES}
+    if refine_steps:
+        from svbrdf_cli.infer import geometry, refine
+
+        geo = geometry.estimate(image, height=twin.found["flash_height"])
+        maps = {k: v for k, v in refine.refine(image, maps, geo, refine_steps).stored.items() if k in cv.MAP_NAMES}
+    return round(card.relight_rmse(maps), 4)
 
 
 def score_des19(net, des19, size=None):
