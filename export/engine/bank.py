@@ -24,6 +24,7 @@ and the manifest lists every shard with its materials' sources (``procedural:<fa
 from __future__ import annotations
 
 import json
+import math
 import os
 import time
 
@@ -47,6 +48,15 @@ MIX_SOURCE_SHARDS = 32
 #: Shards of prints and dyed patterns (:func:`export.data.procedural.printed`: colour edges without
 #: relief), appended after the first 8000 materials so that a bank grown before them keeps its shards.
 PRINT_SHARDS = range(125, 135)
+#: Shards of dark glossy dielectrics (black plastics, lacquer, dark leather, stained wood: the
+#: procedural families darkened and made glossier, :func:`_dark`), after the prints. Auto-exposed,
+#: a black glossy dielectric and a dark metal look alike; with metals 8 % of the procedural materials
+#: and dark glossy dielectrics few, the chain called a black phone case kept out of training metal.
+DARK_SHARDS = range(135, 143)
+#: Families a dark shard draws from, and the ranges of its factors on the diffuse and the roughness.
+DARK_FAMILIES = ("plastic_paint", "leather", "wood", "marble", "tiles", "scales", "fabric", "paper")
+DARK_ALBEDO = (0.03, 0.3)
+DARK_GLOSS = (0.3, 0.9)
 #: Probability that a procedural material is a metal (real captures: about 12 % metals, with the CC0 sets).
 METAL_FRACTION = 0.08
 
@@ -152,6 +162,20 @@ class _Cc0Source:
         return {key: torch.cat([p[key] for p in parts]) for key in cv.MAP_NAMES}, names
 
 
+def _dark(g, n):
+    """``n`` dark glossy dielectrics: procedural materials of :data:`DARK_FAMILIES` (F0 at most 0.08) with
+    the diffuse times a factor log-uniform in :data:`DARK_ALBEDO` and the roughness times one uniform in
+    :data:`DARK_GLOSS`."""
+    m = procedural.random_materials(g, n, SIZE, device="cpu", families=DARK_FAMILIES)
+    k = torch.exp(math.log(DARK_ALBEDO[0]) + torch.rand(n, generator=g) * math.log(DARK_ALBEDO[1] / DARK_ALBEDO[0]))
+    r = DARK_GLOSS[0] + torch.rand(n, generator=g) * (DARK_GLOSS[1] - DARK_GLOSS[0])
+    maps = {k_: m[k_] for k_ in cv.MAP_NAMES}
+    maps["diffuse"] = maps["diffuse"] * k.reshape(-1, 1, 1, 1)
+    maps["roughness"] = (maps["roughness"] * r.reshape(-1, 1, 1, 1)).clamp(0.04, 1.0)
+    maps["specular"] = maps["specular"].clamp(max=0.08)  # a painted metal's chips too: dielectric only
+    return maps, [f"dark:{f}" for f in m["family"]]
+
+
 def _blend_masks(g, n):
     from export.data.dataset import blend_mask
 
@@ -178,6 +202,8 @@ def grow(root=None, target=8000, seed=0, shared=None, progress=print):
         kind = "procedural"
         if index in PRINT_SHARDS:
             kind = "print"
+        elif index in DARK_SHARDS:
+            kind = "dark"
         elif u < CC0_FRACTION:
             if cc0_source is None:
                 cc0_source = _Cc0Source(shared)
@@ -185,7 +211,9 @@ def grow(root=None, target=8000, seed=0, shared=None, progress=print):
         elif u < CC0_FRACTION + MIX_FRACTION and index >= MIX_SOURCE_SHARDS:
             kind = "mix"
         drawn = None
-        if kind == "print":
+        if kind == "dark":
+            drawn = _dark(g, SHARD)
+        elif kind == "print":
             m = procedural.random_materials(g, SHARD, SIZE, device="cpu", families=["printed"])
             drawn = {k: m[k] for k in cv.MAP_NAMES}, [f"print:{f}" for f in m["family"]]
         elif kind == "cc0":

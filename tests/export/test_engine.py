@@ -91,6 +91,21 @@ def test_a_bank_grown_past_its_print_shards_holds_prints_and_keeps_its_earlier_s
     assert bank_mod.read_manifest(own)["shards"][2]["kind"] == "print"
 
 
+def test_dark_shards_hold_dark_glossy_dielectrics(tmp_path, small_bank, monkeypatch):
+    monkeypatch.setattr(bank_mod, "PRINT_SHARDS", range(0))
+    monkeypatch.setattr(bank_mod, "DARK_SHARDS", range(2, 3))
+    root = str(tmp_path / "bank")
+    bank_mod.grow(root, 3 * bank_mod.SHARD, progress=None)
+    shard = bank_mod.read_manifest(root)["shards"][2]
+    assert shard["kind"] == "dark" and all(x.startswith("dark:") for x in shard["sources"])
+    bank = bank_mod.Bank(root)
+    dark = bank.maps(torch.arange(2 * bank_mod.SHARD, 3 * bank_mod.SHARD))
+    rest = bank.maps(torch.arange(0, 2 * bank_mod.SHARD))
+    assert float(dark["diffuse"].mean()) < 0.3 * float(rest["diffuse"].mean())
+    assert float(dark["roughness"].mean()) < float(rest["roughness"].mean())
+    assert float(dark["specular"].amax()) < 0.1  # dielectrics only
+
+
 def test_a_batch_has_what_each_stage_needs(small_bank):
     bank = bank_mod.Bank(small_bank)
     g = torch.Generator().manual_seed(0)
