@@ -591,7 +591,7 @@ def runtime_twin(net, size):
 def load_card():
     """``card_blue_9lights`` (:class:`export.studies.benchmark.NineLights`), or None without the shared data."""
     from export.files import shared_data
-    from export.studies.benchmark import NineLights
+    from export.render.relight import NineLights
 
     folder = os.path.join(shared_data(), "real", "card_blue_9lights")
     return NineLights(folder) if os.path.isdir(folder) else None

@@ -49,13 +49,13 @@ import torch
 from export.studies import methods as method_zoo
 from export.studies.auto_calibration import CALIBRATION_SAMPLES, calibrate, calibration_table, generated
 from export.studies.auto_calibration import evidence as auto_evidence, evidence_table as auto_table
-from export.studies.evaluate import chw, fit_intensity, load_des19, relight_rmse, score, score_predictions
+from export.studies.evaluate import chw, load_des19, relight_rmse, score, score_predictions
 from export.files import REAL_PHOTOS, command_errors, shared_root
-from export.render.brdf import render_maps
+from export.render.relight import NineLights
 from svbrdf_cli import conventions as cv
 from export.studies.capture_speed import median_seconds
 from svbrdf_cli.errors import SvbrdfError
-from svbrdf_cli.write.mapset import read_map_set, read_stored_maps, stored_to_linear
+from svbrdf_cli.write.mapset import read_map_set
 
 MAPS = cv.MAP_NAMES
 
@@ -74,53 +74,6 @@ def paper_accuracy(samples, des19):
     rel = [relight_rmse(chw(read_map_set(os.path.join(des19, name), paper, linear_albedo=True)), gt)
            for name, _, gt in samples]
     return {**maps, "relight": float(np.mean(rel))}
-
-
-# --------------------------------------------------------------------------
-# The real 9-light capture
-# --------------------------------------------------------------------------
-
-class NineLights:
-    """``card_blue_9lights``: 9 rectified photos with known light = camera positions (cm)."""
-
-    def __init__(self, folder, size=256):
-        import cv2
-
-        from svbrdf_cli.imageio import read_image
-
-        with open(os.path.join(folder, "parameters.json")) as f:
-            p = json.load(f)
-        scale = 2 * cv.SURFACE_HALF_SIZE / p["image_size"]  # cm -> the conventions' units
-        self.lights = [tuple(float(c) * scale for c in pos) for pos in p["light_pos"]]
-        self.photos = [cv2.resize(read_image(os.path.join(folder, f"{i:02d}.jpg")), (size, size),
-                                  interpolation=cv2.INTER_AREA) for i in p["idx"]]
-        self.folder = folder
-
-    def network_input(self):
-        """Photo 00 as the tool feeds it to the networks (auto exposure)."""
-        from svbrdf_cli.infer.exposure import network_input
-
-        return network_input(cv.image_to_linear(self.photos[0]))
-
-    def _render(self, lin, i):
-        m = {k: v[None] for k, v in chw(lin).items()}
-        return render_maps(m, light=self.lights[i], camera=self.lights[i], intensity=1.0)[0].permute(1, 2, 0).numpy()
-
-    def relight_rmse(self, stored):
-        """Mean RMSE over photos 01-08 of renders lit as they were, at the intensity fitted on photo 00."""
-        lin = stored_to_linear(stored)
-        k = fit_intensity(self._render(lin, 0), self.photos[0])
-        errs = []
-        for i in range(1, len(self.photos)):
-            ok = (self.photos[i] < 0.98).all(-1)
-            pred = cv.image_to_encoded(self._render(lin, i) * k)
-            errs.append(float(np.sqrt(((pred - self.photos[i])[ok] ** 2).mean())))
-        return float(np.mean(errs))
-
-    def reference_maps(self):
-        """The capture's reference maps (MaterialGAN's file names), as stored."""
-        files = {"normal": "nom", "diffuse": "dif", "roughness": "rgh", "specular": "spe"}
-        return read_stored_maps(os.path.join(self.folder, "reference_maps"), files)
 
 
 # --------------------------------------------------------------------------

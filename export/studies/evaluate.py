@@ -37,6 +37,7 @@ import torch
 from export.files import command_errors, shared_root
 from export.render import targets
 from export.render.brdf import render, render_maps
+from export.render.relight import fit_intensity
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.errors import SvbrdfError
 from svbrdf_cli.imageio import read_image
@@ -124,14 +125,6 @@ def oracle_scale(pred_linear, gt_linear):
     g = torch.cat([gt_linear["diffuse"].flatten(), gt_linear["specular"].flatten()])
     k = float((p * g).sum() / (p * p).sum().clamp_min(1e-12))
     return dict(pred_linear, diffuse=pred_linear["diffuse"] * k, specular=pred_linear["specular"] * k), k
-
-
-def fit_intensity(rendered, photo):
-    """The light intensity that makes ``rendered`` (linear, at unit intensity) best reproduce ``photo``
-    (encoded), both (H, W, C) arrays: least squares in linear space over the photo's unsaturated pixels."""
-    ok = np.broadcast_to((photo < 0.98).all(-1, keepdims=True), rendered.shape)
-    r, t = rendered[ok], cv.image_to_linear(photo)[ok]
-    return float((r * t).sum()) / max(float((r * r).sum()), 1e-12)
 
 
 def known_flash_scale(pred_linear, photo, intensity=cv.FLASH_INTENSITY):

@@ -36,7 +36,7 @@ import numpy as np
 import torch
 
 from export.studies import methods as method_zoo
-from export.studies.benchmark import NineLights
+from export.render.relight import NineLights
 from export.studies.evaluate import chw
 from export.studies.evaluate import load_des19, relight_rmse, render, score
 from export.files import command_errors, shared_root
