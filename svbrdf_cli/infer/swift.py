@@ -38,33 +38,41 @@ FILE = "chain.onnx"
 OUTPUTS = {"masks": ("M_b", "M_h"), "aux": ("I_bf", "I_hr", "I_hr2")}
 
 
-#: How far round the photo's clipped pixels the diffuse is filled, as a share of the width.
-CLIPPED_MARGIN = 0.01
+#: How far round the pixels it fills :func:`fill_highlight` reaches, as a share of the width.
+FILL_MARGIN = 0.01
+#: The chain's highlight mask ``M_h`` (luminance) above which :func:`fill_highlight` fills the diffuse.
+HIGHLIGHT_MASK = 0.15
 
 
-def fill_clipped(diffuse, image):
-    """The stored ``diffuse`` filled from its surroundings where the encoded ``image`` is clipped (at
-    its plateau, :func:`svbrdf_cli.conventions.clip_level`, and :data:`CLIPPED_MARGIN` round it), the
-    texture just beside moved onto the fill, as the physical estimate fills its own
-    (:func:`svbrdf_cli.infer.physical.texture_beside`).
+def fill_highlight(diffuse, image, highlight=None):
+    """The stored ``diffuse`` filled from its surroundings where the highlight hid the albedo: where
+    the encoded ``image`` is clipped (at its plateau, :func:`svbrdf_cli.conventions.clip_level`) and
+    where the chain's own highlight mask ``highlight`` (``M_h``, encoded) is above
+    :data:`HIGHLIGHT_MASK`, with :data:`FILL_MARGIN` round them; the texture just beside is moved onto
+    the fill, as the physical estimate fills its own (:func:`svbrdf_cli.infer.physical.texture_beside`).
 
-    The photo says nothing of the albedo under a clipped highlight, and the chain, shown a white
-    blob, left a grey or dark disc there (Des19's polished marble). Measured on Des19 through the
-    capture path (the run's chain at 1,005k samples): diffuse RMSE 0.0411 -> 0.0370, held-out
-    relighting 0.0591 -> 0.0575 (filled before the trends are divided out); the card 0.1526 -> 0.1509.
-    Filling also where the fitted lobe's share of the photo is above 0.8, as the estimate does, left
-    Des19 as it was and raised the card's error (0.1527; above 0.5: 0.1624)."""
+    The photo says nothing of the albedo under a clipped highlight, and little under a bright one:
+    the aux stage's highlight-removed renderings (``I_hr``, ``--debug``) hold a grey blob there on real
+    photos, and the chain's diffuse kept it as a pale or dark disc (the wood, the red lacquer, the
+    green leather of ``docs/figures/real_previews.png``; Des19's polished marble). Measured on Des19
+    through the capture path: the clipped pixels (the chain at 1,005k samples) diffuse RMSE 0.0411 ->
+    0.0370, held-out relighting 0.0591 -> 0.0575, the card 0.1526 -> 0.1509; ``M_h`` too (at 1,066k)
+    0.0374 -> 0.0367, 0.0575 -> 0.0572, the card 0.1415 -> 0.1418 (above 0.3: 0.0371, 0.0573, 0.1416).
+    Filling where the estimate's fitted lobe is above 0.8 of the photo instead raised the card's
+    error (0.1527; above 0.5: 0.1624)."""
     import cv2
 
-    from svbrdf_cli.imageops import fill_from_surroundings
+    from svbrdf_cli.imageops import fill_from_surroundings, luminance
     from svbrdf_cli.infer.physical import CLIPPED, texture_beside
 
     img = np.asarray(image, np.float32)
-    clipped = (img >= CLIPPED * cv.clip_level(img)).any(-1)  # at the plateau an exposure darkened
-    if not clipped.any():
+    mask = (img >= CLIPPED * cv.clip_level(img)).any(-1)  # at the plateau an exposure darkened
+    if highlight is not None:
+        mask |= luminance(np.asarray(highlight, np.float32)) > HIGHLIGHT_MASK
+    if not mask.any():
         return diffuse
-    k = max(3, int(CLIPPED_MARGIN * img.shape[1]) | 1)
-    mask = cv2.dilate(clipped.astype(np.uint8), np.ones((k, k), np.uint8)).astype(bool)
+    k = max(3, int(FILL_MARGIN * img.shape[1]) | 1)
+    mask = cv2.dilate(mask.astype(np.uint8), np.ones((k, k), np.uint8)).astype(bool)
     lin = cv.albedo_to_linear(diffuse)
     lin = fill_from_surroundings(lin, mask, texture_beside(lin, mask))
     return cv.albedo_to_stored(np.clip(lin, 0.0, 1.0)).astype(np.float32)
@@ -145,11 +153,11 @@ class SwiftModel:
     def __call__(self, image):
         """(H, W, 3) encoded photo -> the maps (stored encoding) and the masks and auxiliary
         renderings (encoded images) for ``--debug``: :meth:`network`'s, the diffuse filled where the
-        photo is clipped (:func:`fill_clipped`) and the flash's trends taken off
+        highlight hid it (:func:`fill_highlight`) and the flash's trends taken off
         (:func:`flatten_flash_trends`)."""
         out = self.network(image)
         t0 = time.perf_counter()
-        out["diffuse"] = fill_clipped(out["diffuse"], image)
+        out["diffuse"] = fill_highlight(out["diffuse"], image, out["M_h"])
         out.update(flatten_flash_trends(out, self.fit.rho))
         self.timings["physics"] = time.perf_counter() - t0
         return out

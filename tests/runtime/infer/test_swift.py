@@ -45,7 +45,7 @@ def test_maps_without_a_flash_trend_are_kept():
 
 
 def test_the_diffuse_under_a_clipped_highlight_is_filled_from_around_it():
-    from svbrdf_cli.infer.swift import fill_clipped
+    from svbrdf_cli.infer.swift import fill_highlight
 
     n = 96
     rho = _rho(n, foot=(0.0, 0.0))
@@ -54,14 +54,33 @@ def test_the_diffuse_under_a_clipped_highlight_is_filled_from_around_it():
     hole = rho < 0.15
     diffuse = np.where(hole[..., None], 0.05, albedo)  # a dark disc where the photo was white
     photo = np.where(hole[..., None], 1.0, 0.5 * np.ones((n, n, 3)))
-    out = cv.albedo_to_linear(fill_clipped(cv.albedo_to_stored(diffuse).astype(np.float32), photo))
+    out = cv.albedo_to_linear(fill_highlight(cv.albedo_to_stored(diffuse).astype(np.float32), photo))
     assert 0.8 < out[hole].mean() / albedo[hole].mean() < 1.25  # filled at its surroundings' level
     assert out[hole].std(0).mean() > 0.3 * albedo[hole].std(0).mean()  # with texture, not a blot
     far = rho > 0.4
     assert np.abs(out[far] - albedo[far]).max() < 1e-2  # the rest is kept
     photo = np.where(hole[..., None], 1.0, 0.3 + 0.3 * g.random((n, n, 3)))
-    darkened = cv.albedo_to_linear(fill_clipped(cv.albedo_to_stored(diffuse).astype(np.float32), photo * 0.6))
+    darkened = cv.albedo_to_linear(fill_highlight(cv.albedo_to_stored(diffuse).astype(np.float32), photo * 0.6))
     assert 0.8 < darkened[hole].mean() / albedo[hole].mean() < 1.25  # clipped, then darkened by the exposure
     unclipped = 0.3 + 0.3 * g.random((n, n, 3))
-    same = fill_clipped(cv.albedo_to_stored(diffuse).astype(np.float32), unclipped)
+    same = fill_highlight(cv.albedo_to_stored(diffuse).astype(np.float32), unclipped)
     assert np.array_equal(same, cv.albedo_to_stored(diffuse).astype(np.float32))
+
+
+def test_the_diffuse_under_the_chains_highlight_mask_is_filled_too():
+    from svbrdf_cli.infer.swift import fill_highlight
+
+    n = 96
+    rho = _rho(n, foot=(0.1, 0.1))
+    g = np.random.default_rng(4)
+    albedo = (0.3 * (1 + 0.1 * g.standard_normal((n, n))))[..., None] * np.array([0.8, 0.5, 0.3])
+    spot = rho < 0.15
+    diffuse = np.where(spot[..., None], 0.12, albedo)  # the grey disc the aux stage leaves
+    photo = 0.3 + 0.3 * g.random((n, n, 3))  # bright but not clipped
+    mask = np.where(spot[..., None], 0.8, 0.0) * np.ones(3)
+    stored = cv.albedo_to_stored(diffuse).astype(np.float32)
+    kept = cv.albedo_to_linear(fill_highlight(stored, photo))
+    out = cv.albedo_to_linear(fill_highlight(stored, photo, mask))
+    assert abs(kept[spot].mean() - 0.12) < 0.01  # nothing clipped, no mask: kept as it is
+    assert 0.8 < out[spot].mean() / albedo[spot].mean() < 1.25
+    assert np.abs(out[rho > 0.4] - albedo[rho > 0.4]).max() < 1e-2
