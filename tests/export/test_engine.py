@@ -372,14 +372,20 @@ def test_a_compact_checkpoint_resumes_the_run_exactly(tmp_path, small_bank):
     assert full.ema is not None and all(torch.equal(full.ema[k], resumed.ema[k]) for k in full.ema)
 
 
+def _speaking_net():
+    """The engine's chain, seeded, its zero heads given something to say."""
+    torch.manual_seed(0)
+    net = nets.build().eval()
+    for m in (net.aux, net.maps):
+        torch.nn.init.normal_(m.head.weight, std=0.01)
+    return net
+
+
 def test_the_exported_chain_matches_torch(tmp_path):
     ort = pytest.importorskip("onnxruntime")
     from export.engine import onnx as engine_onnx
 
-    torch.manual_seed(0)
-    net = nets.build().eval()
-    for m in (net.aux, net.maps):  # give the zero heads something to say
-        torch.nn.init.normal_(m.head.weight, std=0.01)
+    net = _speaking_net()
     path = engine_onnx.export(net, str(tmp_path / "chain.onnx"), provenance={"test": True})
     photo = torch.rand(1, 3, 96, 64)
     light = torch.tensor([[0.1, 0.2, 2.4]])
@@ -403,10 +409,7 @@ def test_the_runtime_runs_the_exported_chain_as_torch_does(tmp_path):
     from svbrdf_cli.infer.chain import padding
     from svbrdf_cli.infer.registry import load_model
 
-    torch.manual_seed(0)
-    net = nets.build().eval()
-    for m in (net.aux, net.maps):  # give the zero heads something to say
-        torch.nn.init.normal_(m.head.weight, std=0.01)
+    net = _speaking_net()
     folder = tmp_path / "swift"
     engine_onnx.export(net, str(folder / "chain.onnx"), provenance={"samples": 7})
     model = load_model(str(folder))
@@ -446,10 +449,7 @@ def test_the_runtime_runs_the_chain_at_the_size_it_trained_at(tmp_path):
     from svbrdf_cli.infer.chain import padding
     from svbrdf_cli.infer.registry import load_model
 
-    torch.manual_seed(0)
-    net = nets.build().eval()
-    for m in (net.aux, net.maps):
-        torch.nn.init.normal_(m.head.weight, std=0.01)
+    net = _speaking_net()
     folder = tmp_path / "swift"
     engine_onnx.export(net, str(folder / "chain.onnx"), provenance={}, run_size=64)
     model = load_model(str(folder))
@@ -512,10 +512,7 @@ def test_the_runs_twin_of_the_runtime_gives_the_exported_chains_maps(tmp_path):
     from export.engine.run import runtime_twin
     from svbrdf_cli.infer.registry import load_model
 
-    torch.manual_seed(0)
-    net = nets.build().eval()
-    for m in (net.aux, net.maps):
-        torch.nn.init.normal_(m.head.weight, std=0.01)
+    net = _speaking_net()
     engine_onnx.export(net, str(tmp_path / "swift" / "chain.onnx"), provenance={}, run_size=64)
     g = torch.Generator().manual_seed(7)
     img = (0.2 + 0.5 * torch.rand(128, 128, 3, generator=g)).numpy()
