@@ -84,3 +84,15 @@ def test_the_diffuse_under_the_chains_highlight_mask_is_filled_too():
     assert abs(kept[spot].mean() - 0.12) < 0.01  # nothing clipped, no mask: kept as it is
     assert 0.8 < out[spot].mean() / albedo[spot].mean() < 1.25
     assert np.abs(out[rho > 0.4] - albedo[rho > 0.4]).max() < 1e-2
+
+
+def test_a_highlight_mask_over_most_of_the_image_fills_nothing():
+    from svbrdf_cli.infer.swift import MAX_MASK_SHARE, fill_highlight
+
+    n = 64
+    g = np.random.default_rng(5)
+    diffuse = cv.albedo_to_stored(0.2 + 0.1 * g.random((n, n, 3))).astype(np.float32)
+    photo = 0.3 + 0.3 * g.random((n, n, 3))
+    mask = np.zeros((n, n, 3))
+    mask[: int(n * (MAX_MASK_SHARE + 0.1))] = 0.9
+    assert np.array_equal(fill_highlight(diffuse, photo, mask), diffuse)
