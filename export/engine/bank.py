@@ -258,6 +258,8 @@ class Bank:
                     parts[k].append(torch.from_numpy(z[k]))
             self.sources += s["sources"]
         self.arrays = {k: torch.cat(v) for k, v in parts.items()}
+        #: (N,) bool: the materials scanned from real ones (the CC0 sets), not made procedurally.
+        self.scanned = torch.tensor([s.startswith("cc0:") for s in self.sources], dtype=torch.bool)
         self.root = root
 
     def __len__(self):

@@ -144,6 +144,11 @@ def test_gloss_scale_makes_a_material_glossier_and_keeps_its_pattern(small_bank)
     assert (k >= batches.GLOSS_SCALE[0] - 1e-6).all() and (k <= batches.GLOSS_SCALE[1] + 1e-6).all()
     assert float(k.std()) > 0.01  # one factor per sample, not one for all
     assert torch.allclose(out, rough * k.reshape(-1, 1, 1, 1), atol=1e-6)  # the pattern kept
+    keep = torch.tensor([True, False] * 4)
+    kept = batches.gloss_scale(rough, torch.Generator().manual_seed(2), keep=keep)
+    assert torch.equal(kept[keep], rough[keep])  # scanned materials keep their roughness
+    assert torch.equal(kept[~keep], out[~keep])  # the others get the same factors as without the mask
+    assert not bank.scanned.any()  # a procedural bank
     made = batches.materials(bank, torch.Generator().manual_seed(3), 16, 32)
     assert float(made["roughness"].min()) >= 0.02 and float(made["roughness"].max()) <= 1.0
 
