@@ -162,12 +162,17 @@ class _Cc0Source:
         return {key: torch.cat([p[key] for p in parts]) for key in cv.MAP_NAMES}, names
 
 
+def log_uniform(g, n, low, high):
+    """(n,) factors drawn log-uniformly in [low, high] from ``g``."""
+    return torch.exp(math.log(low) + torch.rand(n, generator=g) * math.log(high / low))
+
+
 def _dark(g, n):
     """``n`` dark glossy dielectrics: procedural materials of :data:`DARK_FAMILIES` (F0 at most 0.08) with
     the diffuse times a factor log-uniform in :data:`DARK_ALBEDO` and the roughness times one uniform in
     :data:`DARK_GLOSS`."""
     m = procedural.random_materials(g, n, SIZE, device="cpu", families=DARK_FAMILIES)
-    k = torch.exp(math.log(DARK_ALBEDO[0]) + torch.rand(n, generator=g) * math.log(DARK_ALBEDO[1] / DARK_ALBEDO[0]))
+    k = log_uniform(g, n, *DARK_ALBEDO)
     r = DARK_GLOSS[0] + torch.rand(n, generator=g) * (DARK_GLOSS[1] - DARK_GLOSS[0])
     maps = {k_: m[k_] for k_ in cv.MAP_NAMES}
     maps["diffuse"] = maps["diffuse"] * k.reshape(-1, 1, 1, 1)

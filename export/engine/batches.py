@@ -60,7 +60,7 @@ def relief_scale(maps, g, low=RELIEF_SCALE[0], high=RELIEF_SCALE[1]):
     0.14 on Des19's ground truth); this spreads them over flat to steep, so the relief a network
     predicts has to be read from the photo."""
     b = maps["normal"].shape[0]
-    k = torch.exp(math.log(low) + torch.rand(b, generator=g) * math.log(high / low)).reshape(-1, 1, 1, 1)
+    k = bank_mod.log_uniform(g, b, low, high).reshape(-1, 1, 1, 1)
     n = maps["normal"]
     return {**maps, "normal": torch.cat([n[:, :2] * k, n[:, 2:]], 1)}
 
@@ -75,7 +75,7 @@ def gloss_scale(roughness, g, low=GLOSS_SCALE[0], high=GLOSS_SCALE[1], keep=None
     0.458 against 0.395). Applied to every material, the factor overshot (mean 0.362 after 100k
     samples) and worsened Des19's relighting (0.0571 -> 0.0596 from the roughness alone)."""
     b = roughness.shape[0]
-    k = torch.exp(math.log(low) + torch.rand(b, generator=g) * math.log(high / low))
+    k = bank_mod.log_uniform(g, b, low, high)
     if keep is not None:
         k = torch.where(keep.reshape(-1), torch.ones_like(k), k)
     return roughness * k.reshape(-1, 1, 1, 1).to(roughness)

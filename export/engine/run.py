@@ -415,8 +415,7 @@ class Run:
             if self.card is None:
                 self.card = (load_card() if self.des19 is None else None) or False
             if self.card:
-                entry["card"] = score_card(self.net, self.card, self.config.size)
-                entry["card_refined"] = score_card(self.net, self.card, self.config.size, DEFAULT_ITERATIONS)
+                entry.update(score_card(self.net, self.card, self.config.size))
         with open(os.path.join(self.folder, "curve.jsonl"), "a") as f:
             f.write(json.dumps(entry) + "\n")
         self.log(f"eval: {json.dumps(entry)}")
@@ -597,19 +596,20 @@ def load_card():
     return NineLights(folder) if os.path.isdir(folder) else None
 
 
-def score_card(net, card, size, refine_steps=0):
-    """The card's relighting error of the chain's maps from photo 00 as ``svbrdf capture`` makes them
-    (:func:`runtime_twin`; then ``--refine refine_steps`` when not 0), lit as the 8 other photos were."""
+def score_card(net, card, size, refine_steps=DEFAULT_ITERATIONS):
+    """The card's relighting errors of the chain's maps from photo 00 as ``svbrdf capture`` makes them
+    (:func:`runtime_twin`), lit as the 8 other photos were: ``{"card": ..., "card_refined": ...}``, the
+    second after ``--refine refine_steps`` on the same maps."""
+    from svbrdf_cli.infer import geometry, refine
+
     twin = runtime_twin(net, size)
     image = card.network_input()
     out = twin(image)
     maps = {k: out[k] for k in cv.MAP_NAMES}
-    if refine_steps:
-        from svbrdf_cli.infer import geometry, refine
-
-        geo = geometry.estimate(image, height=twin.found["flash_height"])
-        maps = {k: v for k, v in refine.refine(image, maps, geo, refine_steps).stored.items() if k in cv.MAP_NAMES}
-    return round(card.relight_rmse(maps), 4)
+    geo = geometry.estimate(image, height=twin.found["flash_height"])
+    refined = refine.refine(image, maps, geo, refine_steps).stored
+    return {"card": round(card.relight_rmse(maps), 4),
+            "card_refined": round(card.relight_rmse({k: refined[k] for k in cv.MAP_NAMES}), 4)}
 
 
 def score_des19(net, des19, size=None):
