@@ -318,9 +318,12 @@ def calibration_table(rule):
 @click.option("--margin", default=MARGIN, show_default=True, help="Tolerated relative error over the best tier.")
 @click.option("--repeat", default=5, show_default=True, help="Timed runs per tier (median).")
 @click.option("--out", type=click.Path(dir_okay=False), default=auto_tier.RULE_FILE, show_default=True)
-def cli(samples, margin, repeat, out):
+@click.option("--threads", default=0, show_default=True,
+              help="Threads for torch's data generation (0: every core; 1 beside a training run, which it "
+                   "would otherwise stall).")
+def cli(samples, margin, repeat, out, threads):
     """Calibrate --model auto's rule on generated photos and write it."""
-    torch.set_num_threads(max(1, os.cpu_count() or 1))
+    torch.set_num_threads(threads or max(1, os.cpu_count() or 1))
     with command_errors():
         rule = calibrate(generated(samples), margin=margin, repeat=repeat, log=click.echo)
     write_json(out, rule)

@@ -27,9 +27,12 @@ BORDER_MARGIN = 32
 
 #: Installed model sets live here, one folder per tier, beside ``--model auto``'s rule (``auto.json``).
 MODELS_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "models")
-#: Names an installed tier may have, cheapest first (``export.nets.chain``'s tiers): ``lite`` is one
-#: end-to-end UNet (maps.onnx only), the others the three-stage chain.
-TIERS = ("lite", "fast", "balanced", "best")
+#: Names an installed tier may have, cheapest first: ``lite`` is one end-to-end UNet (maps.onnx only),
+#: ``swift`` the training engine's chain in one graph (:data:`SWIFT_FILE`, ``export.engine``), the others
+#: ``export.nets.chain``'s three-stage chain.
+TIERS = ("lite", "fast", "swift", "balanced", "best")
+#: The one file of a swift chain's folder (:mod:`svbrdf_cli.infer.swift`).
+SWIFT_FILE = "chain.onnx"
 #: The extra network input of models that refine the physical estimate: its four stored maps
 #: stacked as 10 channels (normal 3, diffuse 3, roughness 1, specular 3).
 PHYSICAL_INPUT = "physical"
@@ -51,7 +54,11 @@ class ModelError(SvbrdfError):
 
 def session(path, threads):
     """An onnxruntime session of ``path`` on ``threads`` threads (0: onnxruntime's choice); a
-    :class:`ModelError` naming the file when it cannot load."""
+    :class:`ModelError` naming the file when it cannot load.
+
+    onnxruntime 1.32, when imported, writes a ``.ses`` file into ``$TMPDIR`` and tries to send usage
+    events; ``ORT_DISABLE_TELEMETRY`` (unless the user set it) stops both."""
+    os.environ.setdefault("ORT_DISABLE_TELEMETRY", "1")
     import onnxruntime as ort
 
     opts = ort.SessionOptions()
@@ -76,7 +83,10 @@ def model_stages(folder):
 
 def installed_tiers():
     """Tiers whose models are in :data:`MODELS_DIR`, cheapest first."""
-    return [t for t in TIERS if model_stages(os.path.join(MODELS_DIR, t))]
+    def installed(folder):
+        return os.path.isfile(os.path.join(folder, SWIFT_FILE)) or model_stages(folder)
+
+    return [t for t in TIERS if installed(os.path.join(MODELS_DIR, t))]
 
 
 class Chain:

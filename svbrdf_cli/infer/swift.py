@@ -31,10 +31,8 @@ import numpy as np
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.imageops import shrink_to
 from svbrdf_cli.infer import flash_fields
+from svbrdf_cli.infer.chain import SWIFT_FILE as FILE
 from svbrdf_cli.infer.chain import ModelError, padding, session
-
-#: The file a folder holds when it is a swift chain.
-FILE = "chain.onnx"
 OUTPUTS = {"masks": ("M_b", "M_h"), "aux": ("I_bf", "I_hr", "I_hr2")}
 
 
