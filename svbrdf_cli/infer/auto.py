@@ -1,7 +1,7 @@
 """``--model auto``: per photo, the cheapest installed tier that is good enough for the scene.
 
-The ladder starts with the physical estimate (``physical``, :mod:`svbrdf_cli.infer.physical`: the default
-model, computed rather than learnt, and the cheapest), then the installed networks. With no network
+The ladder starts with the physical estimate (``physical``, :mod:`svbrdf_cli.infer.physical`: computed
+rather than learnt, and the cheapest), then the installed networks (the default, ``swift``). With no network
 installed the ladder is the physical estimate alone, with no step: ``auto`` is then ``physical``.
 
 The rule lives in ``models/auto.json`` (written by ``python -m export.studies.auto_calibration``,
@@ -79,13 +79,13 @@ def load_rule(path=RULE_FILE):
     """The calibrated rule (a dict; see the module docstring), checked against the installed tiers."""
     if not os.path.isfile(path):
         raise ModelError(f"--model auto needs its rule '{path}', which is missing; reinstall svbrdf or leave "
-                         "--model out for the default (physical).")
+                         "--model out for the default.")
     with open(path) as f:
         rule = json.load(f)
     missing = [t for t in rule["ladder"] if t not in available_tiers()]
     if missing:
         raise ModelError(f"--model auto steps between {', '.join(rule['ladder'])}, but {', '.join(missing)} "
-                         "is not installed; leave --model out for the default (physical).")
+                         "is not installed; leave --model out for the default.")
     if len(rule["steps"]) != len(rule["ladder"]) - 1 or any(s["signal"] not in SIGNALS for s in rule["steps"]):
         raise ModelError(f"'{path}' is not a rule this version understands; re-run python -m export.studies.auto_calibration.")
     return rule

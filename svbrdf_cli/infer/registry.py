@@ -15,9 +15,10 @@ import os
 from svbrdf_cli.infer import swift
 from svbrdf_cli.infer.chain import MODELS_DIR, TIERS, Chain, ModelError, installed_tiers
 from svbrdf_cli.infer.physical import NAME as PHYSICAL
-#: What ``svbrdf capture`` runs without ``--model``: the physical estimate, until a trained
-#: model beats it on Des19 (every map) and on the real 9-light card (docs/benchmarks.md).
-DEFAULT_MODEL = PHYSICAL
+#: What ``svbrdf capture`` runs without ``--model``: the trained chain ``swift`` when it is installed
+#: (it beats the physical estimate on Des19, every map and relief, and on the real 9-light card:
+#: docs/benchmarks.md), else the physical estimate.
+DEFAULT_MODEL = "swift" if "swift" in installed_tiers() else PHYSICAL
 #: ``--model auto``: per photo, the cheapest installed model good enough for it (:mod:`svbrdf_cli.infer.auto`).
 AUTO = "auto"
 

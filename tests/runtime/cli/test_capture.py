@@ -228,8 +228,19 @@ def test_default_sizes_are_powers_of_two_and_upsampling_is_warned(tmp_path):
     assert len(warned) == 1 and f"'{photo}'" in warned[0] and "upsamples the crop's 520 px 3.9x" in warned[0], out
 
 
-def test_confidence_of_the_default_model_says_where_the_photo_shows_the_maps(tmp_path):
+def test_confidence_of_the_default_model_is_written_for_every_map_and_not_all_white(tmp_path):
     code, out = run("capture", SAMPLE, "-o", tmp_path, "--size", 256, "--confidence", "--no-preview")
+    assert code == 0, out
+    folder = tmp_path / "glazed_tiles"
+    assert sorted(os.listdir(folder / "confidence")) == sorted(f"{k}.png" for k in cv.MAP_NAMES)
+    for k in cv.MAP_NAMES:
+        c = read_image(folder / "confidence" / f"{k}.png")
+        assert c.min() < 0.9 * c.max(), k  # it was: every pixel 255
+
+
+def test_confidence_of_the_physical_estimate_says_where_the_photo_shows_the_maps(tmp_path):
+    code, out = run("capture", SAMPLE, "-o", tmp_path, "--size", 256, "--confidence", "--no-preview",
+                    "--model", "physical")
     assert code == 0, out
     folder = tmp_path / "glazed_tiles"
     rec = json.loads((folder / "material.json").read_text())

@@ -1,4 +1,4 @@
-"""The installed models: the default needs no file, every installed tier is complete, within the size
+"""The installed models: the default is the trained chain, every installed tier is complete, within the size
 budget, with provenance that matches the files; the auto rule covers exactly what is installed; a
 network's maps have no border seam."""
 
@@ -15,21 +15,32 @@ from svbrdf_cli.infer.registry import AUTO, DEFAULT_MODEL, load_model, model_nam
 MB = 1_000_000
 
 
-def test_the_default_model_needs_no_file_and_only_complete_tiers_are_installed():
+def test_the_default_is_the_installed_trained_chain_and_only_complete_tiers_are_installed():
     """models/ holds auto's rule and one complete folder per installed tier (nothing half-installed),
-    each with provenance that matches its files."""
-    from svbrdf_cli.infer.physical import PhysicalModel
+    each with provenance that matches its files; the default is the trained chain ``swift``."""
+    from svbrdf_cli.infer.physical import PHYSICAL_VERSION, PhysicalModel
+    from svbrdf_cli.infer.swift import SwiftModel, is_swift
 
-    assert DEFAULT_MODEL == "physical" and isinstance(load_model(DEFAULT_MODEL), PhysicalModel)
+    assert DEFAULT_MODEL == "swift" and isinstance(load_model(DEFAULT_MODEL), SwiftModel)
+    assert isinstance(load_model("physical"), PhysicalModel) and PHYSICAL_VERSION
     folders = sorted(f for f in os.listdir(MODELS_DIR) if os.path.isdir(os.path.join(MODELS_DIR, f))
                      and f != "__pycache__")
     assert folders == sorted(installed_tiers()) and set(installed_tiers()) <= set(TIERS)
     assert os.path.isfile(os.path.join(MODELS_DIR, "auto.json"))
-    assert model_names() == [DEFAULT_MODEL, *installed_tiers(), AUTO]
+    assert model_names() == ["physical", *installed_tiers(), AUTO]
     for tier in installed_tiers():
         folder = os.path.join(MODELS_DIR, tier)
         with open(os.path.join(folder, "provenance.json")) as f:
             prov = json.load(f)
+        if is_swift(folder):
+            with open(os.path.join(folder, "chain.onnx"), "rb") as f:
+                assert hashlib.sha256(f.read()).hexdigest() == prov["sha256"], tier
+            model = SwiftModel(folder)
+            assert model.tier == tier and model.provenance["samples"] == prov["samples_seen"] > 0
+            assert model.provenance["step"] == prov["step"] and prov["cpu_hours"] > 0 and prov["data"]
+            scores = prov["metrics_through_capture"]["des19_corrected_scorer"]
+            assert {"normal", "relief", "diffuse", "roughness", "specular"} <= set(scores[f"{tier}_refine_60_default"])
+            continue
         chain = Chain(folder)
         assert chain.stages in (STAGES, ("maps",)), tier  # the chain, or one end-to-end network
         for stage in chain.stages:

@@ -1,6 +1,6 @@
 """The bundled sample's texture set stays what it was, bit for bit, through the capture's input and
 output (OpenCV's JPEG decoder and PNG encoder, the native set written from the stored maps, in-place
-upsampling): ``svbrdf capture examples/glazed_tiles.jpg`` with default options (the physical estimate,
+upsampling): ``svbrdf capture examples/glazed_tiles.jpg`` with default options (the trained chain ``swift``,
 ``--refine``'s default steps) writes the image files whose SHA-256 ``python tests/checksums.py record``
 keeps in ``tests/data/checksums.json``. A change that alters the maps on purpose re-records them."""
 
