@@ -17,7 +17,9 @@ detail added) was measured worse on diffuse (0.0445) for a relief 0.01 higher, s
 Where the flash was comes from the physical estimate's fit of the photo (the foot of the flash and
 its height, :func:`svbrdf_cli.infer.physical.fit_flash`), as the training's flash context comes from
 the true flash moved by the error such a fit makes (``export/engine/batches.py``). The same fit
-takes the flash's leftover trends off the diffuse and the roughness (:func:`flatten_flash_trends`).
+takes the flash's leftover trends off the diffuse (:func:`flatten_flash_trends`). The roughness keeps
+the chain's reading where the highlight showed it and, elsewhere, takes its level per albedo class
+from there (:func:`roughness_from_observed`).
 """
 
 from __future__ import annotations
@@ -101,6 +103,62 @@ def flatten_flash_trends(stored, rho):
     return {"diffuse": diffuse.astype(np.float32), "roughness": roughness.astype(np.float32)}
 
 
+#: :func:`roughness_from_observed`: albedo classes, and the scale (a share of the width) below which
+#: the chain's own roughness is kept everywhere.
+ROUGHNESS_CLASSES = 6
+ROUGHNESS_DETAIL = 1 / 32
+
+
+def observed_share(highlight):
+    """(H, W) in [0, 1]: how much the photo shows of the specular lobe at each pixel, from the chain's
+    highlight mask ``M_h`` (1 where it is at least half its peak, smoothed over 4 % of the width); None
+    when the photo shows no highlight."""
+    import cv2
+
+    from svbrdf_cli.imageops import luminance
+
+    h = luminance(np.asarray(highlight, np.float32))
+    peak = float(np.percentile(h, 99.5))
+    if peak < 0.05:
+        return None
+    return cv2.GaussianBlur(np.clip(h / (0.5 * peak), 0.0, 1.0), (0, 0), 0.04 * h.shape[1])
+
+
+def roughness_from_observed(roughness, diffuse, highlight):
+    """The chain's stored ``roughness`` with its level set, away from the highlight, from where the
+    highlight showed: per albedo class of the ``diffuse`` (k-means of its log colour, soft), the mean
+    roughness the chain gave where :func:`observed_share` is high; its detail finer than
+    :data:`ROUGHNESS_DETAIL` of the width is kept.
+
+    One flash photo shows the roughness only where the specular lobe reaches; elsewhere the chain reads
+    the flash's falloff instead (glossy where the photo is dark, rough where it is well lit: the wood
+    of ``docs/figures/real_previews.png``). A material's roughness follows its albedo's classes (wood
+    and its varnish, tile and grout), not the flash, so the level seen under the highlight is carried
+    to the pixels of the same class."""
+    import cv2
+
+    o = observed_share(highlight)
+    if o is None:
+        return roughness
+    r = np.asarray(roughness, np.float32)[..., 0]
+    f = np.log(np.maximum(cv.albedo_to_linear(diffuse), 1e-3)).reshape(-1, 3).astype(np.float32)
+    f = (f - f.mean(0)) / (float(f.std()) + 1e-6)
+    crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 1e-3)
+    cv2.setRNGSeed(0)
+    _, _, centres = cv2.kmeans(f[::7], ROUGHNESS_CLASSES, None, crit, 2, cv2.KMEANS_PP_CENTERS)
+    d2 = ((f[:, None, :] - centres[None]) ** 2).sum(-1)
+    p = np.exp(-(d2 - d2.min(1, keepdims=True)) / max(float(np.median(np.sort(d2, 1)[:, 1])), 1e-4))
+    p /= p.sum(1, keepdims=True)
+    seen = o.ravel()[:, None] * p
+    mass = seen.sum(0)
+    overall = float((o * r).sum() / max(float(o.sum()), 1e-6))
+    level = np.where(mass > 1e-3 * o.size, (seen * r.ravel()[:, None]).sum(0) / np.maximum(mass, 1e-9), overall)
+    carried = (p @ level).reshape(r.shape).astype(np.float32)
+    sigma = ROUGHNESS_DETAIL * r.shape[1]
+    low = cv2.GaussianBlur(r, (0, 0), sigma) - cv2.GaussianBlur(carried, (0, 0), sigma)
+    return np.clip(r - (1.0 - o) * low, 0.0, 1.0)[..., None].astype(np.float32)
+
+
 def is_swift(folder):
     """Whether ``folder`` holds a swift chain (else a folder of per-stage networks)."""
     return os.path.isfile(os.path.join(folder, FILE))
@@ -156,12 +214,14 @@ class SwiftModel:
     def __call__(self, image):
         """(H, W, 3) encoded photo -> the maps (stored encoding) and the masks and auxiliary
         renderings (encoded images) for ``--debug``: :meth:`network`'s, the diffuse filled where the
-        highlight hid it (:func:`fill_highlight`) and the flash's trends taken off
-        (:func:`flatten_flash_trends`)."""
+        highlight hid it (:func:`fill_highlight`) and the flash's trends taken off it
+        (:func:`flatten_flash_trends`), the roughness carried from where the highlight showed
+        (:func:`roughness_from_observed`)."""
         out = self.network(image)
         t0 = time.perf_counter()
         out["diffuse"] = fill_highlight(out["diffuse"], image, out["M_h"])
-        out.update(flatten_flash_trends(out, self.fit.rho))
+        out["diffuse"] = flatten_flash_trends(out, self.fit.rho)["diffuse"]
+        out["roughness"] = roughness_from_observed(out["roughness"], out["diffuse"], out["M_h"])
         self.timings["physics"] = time.perf_counter() - t0
         return out
 

@@ -96,3 +96,51 @@ def test_a_highlight_mask_over_most_of_the_image_fills_nothing():
     mask = np.zeros((n, n, 3))
     mask[: int(n * (MAX_MASK_SHARE + 0.1))] = 0.9
     assert np.array_equal(fill_highlight(diffuse, photo, mask), diffuse)
+
+
+def _highlight(n=128, centre=(0.55, 0.45), radius=0.18):
+    """A highlight mask M_h (encoded RGB) round ``centre`` (shares of the side)."""
+    y, x = np.mgrid[0:n, 0:n] / n
+    h = np.exp(-((x - centre[0]) ** 2 + (y - centre[1]) ** 2) / (2 * radius ** 2)) * 0.6
+    return np.repeat(h[..., None], 3, -1).astype(np.float32)
+
+
+def test_the_roughness_the_highlight_showed_is_carried_to_the_rest_of_the_material():
+    from svbrdf_cli.infer.swift import observed_share, roughness_from_observed
+
+    n = 128
+    g = np.random.default_rng(2)
+    wood = cv.albedo_to_stored(0.25 * (1 + 0.1 * g.standard_normal((n, n, 1))) * np.array([1.0, 0.6, 0.35]))
+    y, x = np.mgrid[0:n, 0:n] / n
+    d = np.hypot(x - 0.55, y - 0.45)
+    highlight = _highlight(n)
+    seen = observed_share(highlight)
+    # the chain's reading of one varnish: 0.3 where the highlight shows it, drifting away from it with
+    # the flash's falloff: glossy in the dark corners, rough where the falloff is bright (the wood of the
+    # real previews)
+    drift = np.clip(1 - seen / 0.5, 0, 1) * (1.2 * np.clip(1.0 - 1.6 * d, 0, 1) - 0.2)
+    read = (0.3 + drift)[..., None].astype(np.float32)
+    out = roughness_from_observed(read, wood.astype(np.float32), highlight)[..., 0]
+    away = seen < 0.1
+    assert np.abs(out[away] - 0.3).mean() < 0.4 * np.abs(read[..., 0][away] - 0.3).mean()  # 0.025 against 0.084
+    assert np.abs(out[seen > 0.99] - 0.3).max() < 0.01 and out.dtype == np.float32  # kept where it showed
+
+
+def test_albedo_classes_keep_their_own_roughness_and_no_highlight_changes_nothing():
+    from svbrdf_cli.infer.swift import roughness_from_observed
+
+    n = 128
+    y, x = np.mgrid[0:n, 0:n]
+    grout = ((x % 32) < 5) | ((y % 32) < 5)
+    albedo = np.where(grout[..., None], [0.5, 0.5, 0.5], [0.05, 0.2, 0.3])
+    truth = np.where(grout, 0.9, 0.2)
+    # seen right under the highlight; away from it the chain drifts glossier
+    highlight = _highlight(n, radius=0.15)
+    drift = 0.25 * np.clip(np.hypot(x / n - 0.55, y / n - 0.45) - 0.3, 0, None)
+    read = np.clip(truth - drift, 0, 1)[..., None].astype(np.float32)
+    out = roughness_from_observed(read, cv.albedo_to_stored(albedo).astype(np.float32), highlight)[..., 0]
+    far = np.hypot(x / n - 0.55, y / n - 0.45) > 0.45
+    for cls, want in ((grout, 0.9), (~grout, 0.2)):
+        assert abs(out[far & cls].mean() - want) < abs(read[..., 0][far & cls].mean() - want) / 2, want
+    flat = np.zeros_like(highlight)
+    assert np.array_equal(roughness_from_observed(read, cv.albedo_to_stored(albedo).astype(np.float32), flat), read)
