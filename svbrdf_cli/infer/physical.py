@@ -438,7 +438,7 @@ def highlight_residue(diffuse, blob):
     return cv2.dilate(spot.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))).astype(bool)
 
 
-def _relative_texture(lum):
+def relative_texture(lum):
     """(H, W) brightness over its neighbourhood's (1/64 of the width), within :data:`DETAIL_RANGE`: the
     texture a fill is multiplied by so that it is not a flat, textureless blot."""
     w = lum.shape[1]
@@ -486,9 +486,9 @@ def _fill_with_detail(diffuse, bad, lum, to_albedo, blind):
 
 
 def texture_beside(diffuse, spot):
-    """(H, W) relative texture (:func:`_relative_texture`) of ``diffuse`` just beside ``spot``, moved onto it."""
+    """(H, W) relative texture (:func:`relative_texture`) of ``diffuse`` just beside ``spot``, moved onto it."""
     cols = np.flatnonzero(spot.any(0))
-    return np.roll(_relative_texture(luminance(diffuse)), int(cols[-1] - cols[0]) + 3, axis=1).astype(np.float32)
+    return np.roll(relative_texture(luminance(diffuse)), int(cols[-1] - cols[0]) + 3, axis=1).astype(np.float32)
 
 
 def _residue_spot(img, diffuse):
