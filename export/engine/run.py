@@ -8,7 +8,9 @@ A run is a folder:
   (it finishes the step, saves, and exits 0);
 * ``curve.jsonl``: one line per evaluation (samples seen, CPU hours, stage, the running training
   loss, the generated validation loss of the stage, and Des19 scores of the whole chain, run at
-  the run's image size as the runtime runs it: ``des19_size``);
+  the run's image size as the runtime runs it: ``des19_size``; the relighting errors of the maps
+  ``svbrdf capture`` makes with it, without and with ``--refine``, on the real card, ``card``, and on
+  16 generated captures under known lights, ``known_lights``);
 * ``log.txt`` when started with ``python -m export.engine background``.
 
 Stages train in the order of ``schedule`` (the paper's: masks, then aux with the masks frozen,
@@ -184,6 +186,7 @@ class Run:
         self.real = None
         self.des19 = des19
         self.card = None
+        self.known_lights = None
         self.stop_requested = False
 
     # -- state --------------------------------------------------------------------------------
@@ -401,6 +404,15 @@ class Run:
         losses = [float(stage_loss(self.net, stage, b)) for b in self._val_batches(stage)]
         return float(np.mean(losses))
 
+    def _load_known_lights(self):
+        """The first :data:`KNOWN_LIGHTS_COUNT` generated captures under known lights (made once and kept
+        in their cache), or False for a run given its own Des19 (the tests')."""
+        if self.des19 is not None:
+            return False
+        from export.engine.known_lights import captures
+
+        return captures(KNOWN_LIGHTS_COUNT, log=self.log)
+
     def record(self, train_loss):
         """One line of ``curve.jsonl``, the network evaluated with its averaged weights (``ema``)."""
         stage = self.stage or self.config.schedule[-1][0]
@@ -416,6 +428,10 @@ class Run:
                 self.card = (load_card() if self.des19 is None else None) or False
             if self.card:
                 entry.update(score_card(self.net, self.card, self.config.size))
+            if self.known_lights is None:
+                self.known_lights = self._load_known_lights()
+            if self.known_lights:
+                entry.update(score_known_lights(self.net, self.known_lights, self.config.size))
         with open(os.path.join(self.folder, "curve.jsonl"), "a") as f:
             f.write(json.dumps(entry) + "\n")
         self.log(f"eval: {json.dumps(entry)}")
@@ -596,20 +612,45 @@ def load_card():
     return NineLights(folder) if os.path.isdir(folder) else None
 
 
-def score_card(net, card, size, refine_steps=DEFAULT_ITERATIONS):
-    """The card's relighting errors of the chain's maps from photo 00 as ``svbrdf capture`` makes them
-    (:func:`runtime_twin`), lit as the 8 other photos were: ``{"card": ..., "card_refined": ...}``, the
-    second after ``--refine refine_steps`` on the same maps."""
+def captured_maps(twin, image, refine_steps=DEFAULT_ITERATIONS):
+    """The maps ``svbrdf capture`` makes of the encoded ``image`` with ``twin`` (:func:`runtime_twin`):
+    as the chain gives them, and after ``--refine refine_steps`` under the geometry estimated from the
+    photo alone (no EXIF)."""
     from svbrdf_cli.infer import geometry, refine
 
-    twin = runtime_twin(net, size)
-    image = card.network_input()
     out = twin(image)
     maps = {k: out[k] for k in cv.MAP_NAMES}
     geo = geometry.estimate(image, height=twin.found["flash_height"])
     refined = refine.refine(image, maps, geo, refine_steps).stored
-    return {"card": round(card.relight_rmse(maps), 4),
-            "card_refined": round(card.relight_rmse({k: refined[k] for k in cv.MAP_NAMES}), 4)}
+    return maps, {k: refined[k] for k in cv.MAP_NAMES}
+
+
+def score_card(net, card, size, refine_steps=DEFAULT_ITERATIONS):
+    """The card's relighting errors of the chain's maps from photo 00 as ``svbrdf capture`` makes them
+    (:func:`captured_maps`), lit as the 8 other photos were: ``{"card": ..., "card_refined": ...}``, the
+    second after ``--refine refine_steps`` on the same maps."""
+    maps, refined = captured_maps(runtime_twin(net, size), card.network_input(), refine_steps)
+    return {"card": round(card.relight_rmse(maps), 4), "card_refined": round(card.relight_rmse(refined), 4)}
+
+
+#: Generated captures under known lights the run scores its chain on (the first of the study's 48).
+KNOWN_LIGHTS_COUNT = 16
+
+
+def score_known_lights(net, caps, size, refine_steps=DEFAULT_ITERATIONS):
+    """The mean relighting errors, on the generated captures ``caps`` (:mod:`export.engine.known_lights`),
+    of the chain's maps as ``svbrdf capture`` makes them from each photo 0: ``{"known_lights": ...,
+    "known_lights_refined": ...}``. The card is one real material; these are many, so a state that
+    gains on Des19 and the card while it drifts from materials it never saw shows here."""
+    from export.engine.known_lights import photo_input, score
+
+    twin = runtime_twin(net, size)
+    plain, refined = [], []
+    for c in caps:
+        maps, better = captured_maps(twin, photo_input(c), refine_steps)
+        plain.append(score(maps, c))
+        refined.append(score(better, c))
+    return {"known_lights": round(float(np.mean(plain)), 4), "known_lights_refined": round(float(np.mean(refined)), 4)}
 
 
 def score_des19(net, des19, size=None):

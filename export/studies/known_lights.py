@@ -39,7 +39,6 @@ a re-run only runs the methods. Prints a table and writes it as JSON with ``--js
 from __future__ import annotations
 
 import json
-import math
 import os
 import time
 
@@ -47,150 +46,11 @@ import click
 import numpy as np
 import torch
 
-from export.data import procedural, simulate
-from export.engine import bank as bank_mod
-from export.engine import batches
+from export.engine.known_lights import (CACHE_DIR, COUNT, LIGHTS, SEED, SIZE, captures, photo_input,
+                                        score)
 from export.files import command_errors
-from export.render.brdf import render_maps
-from export.render.relight import fit_intensity
 from export.studies import methods as method_zoo
-from svbrdf_cli import conventions as cv
-from svbrdf_cli.imageops import resize
-from svbrdf_cli.infer.exposure import network_input
 from svbrdf_cli.infer.refine import DEFAULT_ITERATIONS
-from svbrdf_cli.write.mapset import stored_to_linear
-
-#: Seed of the captures (none of the bank's, the runs' validation's nor ``refine_eval``'s: see above).
-SEED = 424242
-COUNT = 48
-SIZE = 256
-#: Photos under known lights besides photo 0 (the card's 8).
-LIGHTS = 8
-#: The known lights' distance from the lens and their height, as fractions of the camera's height
-#: (``card_blue_9lights``: 1.85-3.73 cm beside photo 00's light at 16.7 cm, -0.35 to +2.11 cm above it).
-RING_RADIUS = (0.11, 0.22)
-RING_HEIGHT = (0.98, 1.13)
-#: Each light's angle off an even spread round the lens, radians either way.
-RING_JITTER = 0.3
-#: Encoded photo values at or above this are saturated and left out (as the card's scorer does).
-SATURATED = 0.98
-#: Bumped when the captures change: an older cache is made again.
-VERSION = 1
-CACHE_DIR = os.path.join(os.path.expanduser("~"), ".cache", "svbrdf", "known_lights")
-
-
-def ring(g, camera, count=LIGHTS):
-    """``count`` light positions (count, 3) round the lens at ``camera`` (3,), as the card's: evenly
-    round it from a random start (each jittered by :data:`RING_JITTER`), at :data:`RING_RADIUS` and
-    :data:`RING_HEIGHT` of the camera's height."""
-    def draw(lo, hi, n=count):
-        return lo + torch.rand(n, generator=g, dtype=torch.float64) * (hi - lo)
-
-    h = float(camera[2])
-    angle = draw(0.0, 2 * math.pi, 1) + 2 * math.pi * torch.arange(count, dtype=torch.float64) / count
-    angle = angle + draw(-RING_JITTER, RING_JITTER)
-    r, z = draw(*RING_RADIUS) * h, draw(*RING_HEIGHT) * h
-    return torch.stack([camera[0] + r * angle.cos(), camera[1] + r * angle.sin(), z], 1)
-
-
-def material(g, size):
-    """One procedural material (linear maps (1, C, size, size)) as a training batch changes a bank's."""
-    m = procedural.random_materials(g, 1, size, device="cpu", metal_fraction=bank_mod.METAL_FRACTION)
-    stored = {"normal": m["normal"], "roughness": m["roughness"],
-              **{k: m[k].clamp(0, 1) ** (1 / cv.ALBEDO_GAMMA) for k in ("diffuse", "specular")}}
-    maps = batches.tint(bank_mod.linearize(batches.relief_scale(stored, g)), g)
-    maps["roughness"] = batches.gloss_scale(maps["roughness"], g).clamp(0.02, 1.0)
-    return {k: maps[k].float().contiguous() for k in cv.MAP_NAMES}
-
-
-def generate(index, seed=SEED, size=SIZE, ranges=simulate.DEFAULT_RANGES):
-    """Capture ``index`` of ``seed``: ``photos`` (1 + LIGHTS, size, size, 3) uint8, photo 0 by the flash;
-    ``lights`` and ``cameras`` (1 + LIGHTS, 3), where each photo was lit and taken from; ``truth`` the
-    material's maps, stored encoding (HWC, 8 bits as a map file holds them)."""
-    g = torch.Generator().manual_seed(seed * 1_000_003 + index)
-    with torch.no_grad():
-        maps = material(g, size)
-        capture = {k: v.float() for k, v in simulate.sample_capture(g, 1, ranges).items()}
-        lights = torch.cat([capture["light"].double(), ring(g, capture["camera"][0].double())])
-        first = batches.photograph(maps, capture, g)
-        fixed = dict(capture, power=first["intensity"].float().reshape(1))  # the same exposure for every photo
-        photos = [first["photo"]] + [batches.photograph(maps, dict(fixed, light=light[None].float()), g)["photo"]
-                                     for light in lights[1:]]
-    photos = torch.cat(photos).permute(0, 2, 3, 1).numpy()
-    truth = cv.encode_maps({k: v[0].permute(1, 2, 0).numpy() for k, v in maps.items()})
-    return {"photos": np.round(photos * 255).astype(np.uint8),
-            "lights": lights.numpy(), "cameras": np.repeat(capture["camera"].double().numpy(), len(lights), 0),
-            "truth": {k: np.round(np.clip(truth[k], 0, 1) * 255).astype(np.uint8) for k in cv.MAP_NAMES}}
-
-
-def cache_path(seed, count, size, cache_dir=CACHE_DIR):
-    return os.path.join(cache_dir, f"{seed}_{count}.npz" if size == SIZE else f"{seed}_{count}_{size}.npz")
-
-
-def captures(count=COUNT, seed=SEED, size=SIZE, cache_dir=CACHE_DIR, log=None):
-    """Captures 0 .. ``count`` - 1 of ``seed`` (:func:`generate`), from the cache in ``cache_dir`` when
-    it holds them (made and kept there otherwise; ``cache_dir`` None: no cache)."""
-    path = cache_path(seed, count, size, cache_dir) if cache_dir else None
-    if path and os.path.isfile(path):
-        with np.load(path) as z:
-            if int(z["version"]) == VERSION:
-                return [{"photos": z["photos"][i], "lights": z["lights"][i], "cameras": z["cameras"][i],
-                         "truth": {k: z[f"truth_{k}"][i] for k in cv.MAP_NAMES}} for i in range(count)]
-    t0 = time.perf_counter()
-    out = []
-    for i in range(count):
-        out.append(generate(i, seed, size))
-        if log and (i + 1) % 16 == 0:
-            log(f"captures: {i + 1}/{count} ({time.perf_counter() - t0:.0f} s)")
-    if path:
-        os.makedirs(cache_dir, exist_ok=True)
-        tmp = path + ".tmp.npz"
-        np.savez(tmp, version=VERSION, **{k: np.stack([c[k] for c in out]) for k in ("photos", "lights", "cameras")},
-                 **{f"truth_{k}": np.stack([c["truth"][k] for c in out]) for k in cv.MAP_NAMES})
-        os.replace(tmp, path)
-    return out
-
-
-def encoded(x):
-    """Photos or stored maps as floats in [0, 1] (uint8 ones divided by 255)."""
-    x = np.asarray(x)
-    return x.astype(np.float32) / 255 if x.dtype == np.uint8 else x.astype(np.float32)
-
-
-def render_at(lin, light, camera):
-    """Linear HWC ``lin`` maps rendered at unit intensity under ``light`` seen from ``camera`` (HWC)."""
-    m = {k: torch.from_numpy(np.ascontiguousarray(v)).permute(2, 0, 1)[None].float() for k, v in lin.items()}
-    return render_maps(m, light=tuple(map(float, light)), camera=tuple(map(float, camera)),
-                       intensity=1.0)[0].permute(1, 2, 0).numpy()
-
-
-def relight_rmse(stored, photos, lights, cameras):
-    """Mean RMSE over photos 1.. of ``stored`` maps (HWC, float or uint8; resized to the photos' side)
-    rendered as each photo was lit and taken, at the intensity fitted on photo 0; pixels a photo
-    saturated left out."""
-    photos, stored = encoded(photos), {k: encoded(v) for k, v in stored.items()}
-    side = photos.shape[1]
-    lin = {k: resize(np.asarray(v, np.float32)[..., :cv.MAP_CHANNELS[k]], side).reshape(side, side, -1)
-           for k, v in stored_to_linear(stored).items()}
-    lin["normal"] = cv.normalize(lin["normal"])
-    k = fit_intensity(render_at(lin, lights[0], cameras[0]), photos[0])
-    errs = []
-    for i in range(1, len(photos)):
-        ok = (photos[i] < SATURATED).all(-1)
-        pred = cv.image_to_encoded(render_at(lin, lights[i], cameras[i]) * k)
-        errs.append(float(np.sqrt(((pred - photos[i])[ok] ** 2).mean())))
-    return float(np.mean(errs))
-
-
-def score(stored, capture):
-    """:func:`relight_rmse` of ``stored`` maps on one capture of :func:`captures`."""
-    return relight_rmse(stored, capture["photos"], capture["lights"], capture["cameras"])
-
-
-def photo_input(capture):
-    """Photo 0 as ``svbrdf capture`` feeds it to a method (auto exposure, 256², encoded)."""
-    return network_input(cv.image_to_linear(encoded(capture["photos"][0])))
-
 
 class Once:
     """``method`` whose maps of the last image are made once: its plain and ``--refine`` settings share them."""

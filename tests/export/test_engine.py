@@ -527,3 +527,16 @@ def test_the_runs_twin_of_the_runtime_gives_the_exported_chains_maps(tmp_path):
     for k in cv.MAP_NAMES:
         assert got[k].shape == want[k].shape
         assert np.abs(got[k] - want[k]).mean() < 5e-3, k  # bf16 against fp32
+
+
+def test_the_run_scores_its_chain_on_generated_captures_under_known_lights():
+    """``known_lights`` in ``curve.jsonl``: the chain's maps as ``svbrdf capture`` makes them, relit under
+    each capture's known lights; the true maps relight far better, so the score can tell."""
+    from export.engine import known_lights
+    from export.engine.run import score_known_lights
+
+    caps = [known_lights.generate(i, size=64) for i in range(2)]
+    got = score_known_lights(_speaking_net(), caps, 64, refine_steps=5)
+    assert set(got) == {"known_lights", "known_lights_refined"}
+    truth = np.mean([known_lights.score(c["truth"], c) for c in caps])
+    assert 0 < truth < 0.5 * got["known_lights"] < 1 and 0 < got["known_lights_refined"] < 1

@@ -1,9 +1,11 @@
-"""``python -m export.studies.known_lights``: generated captures under known lights, and their relighting score."""
+"""Generated captures under known lights (``export.engine.known_lights``) and their relighting score
+(``python -m export.studies.known_lights``)."""
 
 import numpy as np
 import pytest
 
 from export.files import shared_root
+from export.engine import known_lights as gen
 from export.studies import known_lights as kl
 from export.studies.methods import Floor
 
@@ -12,20 +14,20 @@ SIZE = 64
 
 @pytest.fixture(scope="module")
 def caps():
-    return [kl.generate(i, size=SIZE) for i in range(3)]
+    return [gen.generate(i, size=SIZE) for i in range(3)]
 
 
 def test_a_capture_is_nine_photos_from_one_camera_with_the_lights_round_its_lens(caps):
     c = caps[0]
-    assert c["photos"].shape == (1 + kl.LIGHTS, SIZE, SIZE, 3) and c["photos"].dtype == np.uint8
+    assert c["photos"].shape == (1 + gen.LIGHTS, SIZE, SIZE, 3) and c["photos"].dtype == np.uint8
     assert c["truth"]["normal"].shape == (SIZE, SIZE, 3) and c["truth"]["roughness"].shape == (SIZE, SIZE, 1)
     cam = c["cameras"][0]
     assert (c["cameras"] == cam).all()
     h = cam[2]
     ring = c["lights"][1:]
     r = np.hypot(*(ring[:, :2] - cam[:2]).T) / h
-    assert (r >= kl.RING_RADIUS[0] - 1e-9).all() and (r <= kl.RING_RADIUS[1] + 1e-9).all()
-    assert (ring[:, 2] >= kl.RING_HEIGHT[0] * h - 1e-9).all() and (ring[:, 2] <= kl.RING_HEIGHT[1] * h + 1e-9).all()
+    assert (r >= gen.RING_RADIUS[0] - 1e-9).all() and (r <= gen.RING_RADIUS[1] + 1e-9).all()
+    assert (ring[:, 2] >= gen.RING_HEIGHT[0] * h - 1e-9).all() and (ring[:, 2] <= gen.RING_HEIGHT[1] * h + 1e-9).all()
     assert np.hypot(*(c["lights"][0, :2] - cam[:2])) <= 0.1 * h + 1e-6  # photo 0: the flash beside the lens
     # the photos differ as their lights do (the same exposure: none is a re-exposed copy)
     assert all(np.abs(c["photos"][i].astype(int) - c["photos"][0]).mean() > 0.5 for i in range(1, len(ring) + 1))
@@ -41,13 +43,13 @@ def test_the_floor_is_scored_and_the_true_maps_relight_their_captures_far_better
 
 
 def test_the_score_can_fail_another_materials_maps_relight_a_capture_badly(caps):
-    own = kl.score(caps[0]["truth"], caps[0])
-    assert kl.score(caps[1]["truth"], caps[0]) > 2 * own
-    assert kl.score(Floor()(kl.photo_input(caps[0])), caps[0]) > 2 * own
+    own = gen.score(caps[0]["truth"], caps[0])
+    assert gen.score(caps[1]["truth"], caps[0]) > 2 * own
+    assert gen.score(Floor()(gen.photo_input(caps[0])), caps[0]) > 2 * own
 
 
 def test_the_same_seed_gives_the_same_captures_and_another_seed_others():
-    a, b, other = kl.generate(1, seed=7, size=SIZE), kl.generate(1, seed=7, size=SIZE), kl.generate(1, seed=8, size=SIZE)
+    a, b, other = gen.generate(1, seed=7, size=SIZE), gen.generate(1, seed=7, size=SIZE), gen.generate(1, seed=8, size=SIZE)
     for k in ("photos", "lights", "cameras"):
         assert np.array_equal(a[k], b[k])
     assert all(np.array_equal(a["truth"][k], b["truth"][k]) for k in a["truth"])
@@ -55,9 +57,9 @@ def test_the_same_seed_gives_the_same_captures_and_another_seed_others():
 
 
 def test_the_cache_gives_back_the_captures_it_kept(tmp_path, caps):
-    made = kl.captures(2, kl.SEED, SIZE, str(tmp_path))
-    assert (tmp_path / f"{kl.SEED}_2_{SIZE}.npz").is_file()
-    again = kl.captures(2, kl.SEED, SIZE, str(tmp_path))
+    made = gen.captures(2, gen.SEED, SIZE, str(tmp_path))
+    assert (tmp_path / f"{gen.SEED}_2_{SIZE}.npz").is_file()
+    again = gen.captures(2, gen.SEED, SIZE, str(tmp_path))
     for m, a, c in zip(made, again, caps):  # capture i is the same whatever the count
         for k in ("photos", "lights", "cameras"):
             assert np.array_equal(m[k], a[k]) and np.array_equal(m[k], c[k])
@@ -73,4 +75,4 @@ def test_the_score_is_the_cards_when_the_camera_moves_with_the_light():
     card = NineLights(str(folder))
     maps = Floor()(card.network_input())
     lights = np.array(card.lights)
-    assert kl.relight_rmse(maps, np.stack(card.photos), lights, lights) == pytest.approx(card.relight_rmse(maps), rel=1e-6)
+    assert gen.relight_rmse(maps, np.stack(card.photos), lights, lights) == pytest.approx(card.relight_rmse(maps), rel=1e-6)
