@@ -87,8 +87,12 @@ def test_a_bank_grown_past_its_print_shards_holds_prints_and_keeps_its_earlier_s
     res = CliRunner().invoke(main, ["train", "--run", str(tmp_path / "run"), "--steps", "1", "--checkpoint", "",
                                     "--bank-count", str(3 * bank_mod.SHARD)])
     assert res.exit_code == 0, res.output
-    assert Run(str(tmp_path / "run"), log=lambda m: None, des19=[]).config.bank_count == 3 * bank_mod.SHARD
+    resumed = Run(str(tmp_path / "run"), log=lambda m: None, des19=[])
+    assert resumed.config.bank_count == 3 * bank_mod.SHARD
     assert bank_mod.read_manifest(own)["shards"][2]["kind"] == "print"
+    # it trains on its bank_count materials, not on more that another run left in the folder
+    resumed.config = dataclasses.replace(resumed.config, bank_count=2 * bank_mod.SHARD)
+    assert len(resumed.load_bank().sources) == 2 * bank_mod.SHARD
 
 
 def test_dark_shards_hold_dark_glossy_dielectrics(tmp_path, small_bank, monkeypatch):
