@@ -81,7 +81,7 @@ def model_help():
         auto = (f", '{AUTO}' (per photo, the cheapest of physical and the installed networks that is good enough for it)"
                 if tiers else f", '{AUTO}' (per photo, the cheapest installed model good enough for it: with no network "
                               "installed, physical)")
+    described = {"swift": "swift: the trained masks -> auxiliary renderings -> maps chain"}
     return ("'physical' (the maps computed from the flash physics alone)"
-            + (f", an installed network ({', '.join(tiers)}; swift: the trained masks -> auxiliary renderings -> "
-               "maps chain)" if tiers else "")
+            + (f", an installed network ({', '.join(described.get(t, t) for t in tiers)})" if tiers else "")
             + auto + " or a folder of exported models.")
