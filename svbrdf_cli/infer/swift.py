@@ -96,8 +96,8 @@ def fill_highlight(diffuse, image, highlight=None):
     return cv.albedo_to_stored(np.clip(lin, 0.0, 1.0)).astype(np.float32)
 
 
-def flatten_flash_trends(stored, rho):
-    """The diffuse and the roughness (stored maps) with any trend in the distance ``rho`` to the
+def flatten_flash_trends(stored, rho, names=("diffuse", "roughness")):
+    """The diffuse and (when ``names`` holds it) the roughness (stored maps) with any trend in the distance ``rho`` to the
     flash's foot divided out (:func:`svbrdf_cli.infer.physical.flatten_radial`, the physical
     estimate's last step), their mean level kept.
 
@@ -110,10 +110,11 @@ def flatten_flash_trends(stored, rho):
     from svbrdf_cli.infer.physical import flatten_radial
 
     d = cv.albedo_to_linear(stored["diffuse"])
-    diffuse = cv.albedo_to_stored(np.clip(flatten_radial(d, rho), 0.0, 1.0))
-    r = np.repeat(stored["roughness"], 3, -1)
-    roughness = np.clip(flatten_radial(r, rho)[..., :1], 0.0, 1.0)
-    return {"diffuse": diffuse.astype(np.float32), "roughness": roughness.astype(np.float32)}
+    out = {"diffuse": cv.albedo_to_stored(np.clip(flatten_radial(d, rho), 0.0, 1.0)).astype(np.float32)}
+    if "roughness" in names:
+        r = np.repeat(stored["roughness"], 3, -1)
+        out["roughness"] = np.clip(flatten_radial(r, rho)[..., :1], 0.0, 1.0).astype(np.float32)
+    return out
 
 
 #: :func:`roughness_from_observed`: albedo classes, and the scale (a share of the width) below which
@@ -233,7 +234,7 @@ class SwiftModel:
         out = self.network(image)
         t0 = time.perf_counter()
         out["diffuse"] = fill_highlight(out["diffuse"], image, out["M_h"])
-        out["diffuse"] = flatten_flash_trends(out, self.fit.rho)["diffuse"]
+        out["diffuse"] = flatten_flash_trends(out, self.fit.rho, ("diffuse",))["diffuse"]
         out["roughness"] = roughness_from_observed(out["roughness"], out["diffuse"], out["M_h"])
         self.timings["physics"] = time.perf_counter() - t0
         return out
