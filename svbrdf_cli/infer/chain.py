@@ -38,11 +38,11 @@ SWIFT_FILE = "chain.onnx"
 PHYSICAL_INPUT = "physical"
 
 
-def padding(h, w, multiple):
+def padding(h, w, multiple, margin=BORDER_MARGIN):
     """(margin, np.pad widths, np.pad mode) around an (h, w) network input: a reflected margin of
-    :data:`BORDER_MARGIN`, then up to ``multiple``. The networks' zero padding then shapes the margin,
+    ``margin`` pixels, then up to ``multiple``. The networks' zero padding then shapes the margin,
     which is cropped off, instead of the maps' own border."""
-    m = min(BORDER_MARGIN, h - 1, w - 1)
+    m = min(margin, h - 1, w - 1)
     ph, pw = -(h + 2 * m) % multiple, -(w + 2 * m) % multiple
     pad = ((m, m + ph), (m, m + pw), (0, 0))
     return m, pad, ("reflect" if (m + ph < h and m + pw < w) else "edge")

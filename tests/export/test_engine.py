@@ -416,6 +416,7 @@ def test_the_runtime_runs_the_exported_chain_as_torch_does(tmp_path):
     from export.engine import onnx as engine_onnx
     from svbrdf_cli.cli.main import cli
     from svbrdf_cli.infer.chain import padding
+    from svbrdf_cli.infer.swift import MARGIN
     from svbrdf_cli.infer.registry import load_model
 
     net = _speaking_net()
@@ -427,7 +428,7 @@ def test_the_runtime_runs_the_exported_chain_as_torch_does(tmp_path):
     img = photo[0].permute(1, 2, 0).numpy()
     out = model.network(img)
     light = torch.from_numpy(model.flash(img)).float()[None]
-    m, pad, mode = padding(96, 96, 32)  # the runtime's reflected margin, made here the same way
+    m, pad, mode = padding(96, 96, 32, MARGIN)  # the runtime's reflected margin, made here the same way
 
     def padded(x):
         return torch.from_numpy(np.pad(x[0].permute(1, 2, 0).numpy(), pad, mode=mode)).permute(2, 0, 1)[None]
@@ -456,6 +457,7 @@ def test_the_runtime_runs_the_chain_at_the_size_it_trained_at(tmp_path):
     from export.engine import onnx as engine_onnx
     from svbrdf_cli.imageops import shrink_to
     from svbrdf_cli.infer.chain import padding
+    from svbrdf_cli.infer.swift import MARGIN
     from svbrdf_cli.infer.registry import load_model
 
     net = _speaking_net()
@@ -470,7 +472,7 @@ def test_the_runtime_runs_the_chain_at_the_size_it_trained_at(tmp_path):
     small = shrink_to(img, (64, 64))
     photo = torch.from_numpy(small).permute(2, 0, 1)[None]
     light = torch.from_numpy(model.flash(img)).float()[None]
-    m, pad, mode = padding(64, 64, 32)
+    m, pad, mode = padding(64, 64, 32, MARGIN)
 
     def padded(x):
         return torch.from_numpy(np.pad(x[0].permute(1, 2, 0).numpy(), pad, mode=mode)).permute(2, 0, 1)[None]
