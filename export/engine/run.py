@@ -59,8 +59,8 @@ class RunConfig:
     checkpoint_minutes: float = 10.0
     eval_minutes: float = 30.0
     val_samples: int = 64
-    #: Materials in the bank (it grows to this; from 8000 on, :data:`export.engine.bank.PRINT_SHARDS`
-    #: and :data:`export.engine.bank.DARK_SHARDS`).
+    #: Materials in the bank (it grows to this; from 8000 on, :data:`export.engine.bank.PRINT_SHARDS`,
+    #: :data:`export.engine.bank.DARK_SHARDS` and, from 12032, :data:`export.engine.bank.GREY_SHARDS`).
     bank_count: int = 9152
     bank_root: str | None = None
     #: Share of the maps stage's steps that are self-supervised batches of real photos

@@ -110,6 +110,28 @@ def test_dark_shards_hold_dark_glossy_dielectrics(tmp_path, small_bank, monkeypa
     assert float(dark["specular"].amax()) < 0.1  # dielectrics only
 
 
+def test_grey_shards_hold_dark_grey_glossy_dielectrics(tmp_path, small_bank, monkeypatch):
+    monkeypatch.setattr(bank_mod, "PRINT_SHARDS", range(0))
+    monkeypatch.setattr(bank_mod, "DARK_SHARDS", range(0))
+    monkeypatch.setattr(bank_mod, "GREY_SHARDS", range(2, 3))
+    root = str(tmp_path / "bank")
+    bank_mod.grow(root, 3 * bank_mod.SHARD, progress=None)
+    shard = bank_mod.read_manifest(root)["shards"][2]
+    assert shard["kind"] == "grey" and all(x.startswith("grey:") for x in shard["sources"])
+    bank = bank_mod.Bank(root)
+    grey = bank.maps(torch.arange(2 * bank_mod.SHARD, 3 * bank_mod.SHARD))
+    rest = bank.maps(torch.arange(0, 2 * bank_mod.SHARD))
+
+    def chroma(d):  # mean distance of a colour from its grey, over its brightness
+        return float((d - d.mean(1, keepdim=True)).abs().mean() / d.mean())
+
+    assert float(grey["diffuse"].mean()) < 0.3 * float(rest["diffuse"].mean())
+    assert chroma(grey["diffuse"]) < 0.5 * chroma(rest["diffuse"])
+    assert float(grey["roughness"].mean()) < float(rest["roughness"].mean())
+    assert float(grey["specular"].amax()) < 0.1  # dielectrics only
+    assert float((grey["specular"] - grey["specular"].mean(1, keepdim=True)).abs().amax()) < 0.01  # grey F0
+
+
 def test_a_batch_has_what_each_stage_needs(small_bank):
     bank = bank_mod.Bank(small_bank)
     g = torch.Generator().manual_seed(0)
