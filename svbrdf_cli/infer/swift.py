@@ -32,7 +32,7 @@ import numpy as np
 
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.imageops import shrink_to
-from svbrdf_cli.infer import flash_fields
+from svbrdf_cli.infer import flash_fields, tta
 from svbrdf_cli.infer.chain import SWIFT_FILE as FILE
 from svbrdf_cli.infer.chain import ModelError, padding, session
 OUTPUTS = {"masks": ("M_b", "M_h"), "aux": ("I_bf", "I_hr", "I_hr2")}
@@ -45,6 +45,15 @@ OUTPUTS = {"masks": ("M_b", "M_h"), "aux": ("I_bf", "I_hr", "I_hr2")}
 #: Des19's metals and the generated known-light captures; 16 px is better than 32 on Des19 and the
 #: card but worse on roughness and keeps a speaker grille metal. 32 is kept.
 MARGIN = 32
+#: The passes the chain runs on each photo, averaged (:mod:`svbrdf_cli.infer.tta`'s quarter turns and
+#: mirrors): the photo as it is and turned half round, the flash turned with it. A flat surface under
+#: the flash looks the same after the turn; the chain reads the two a little differently, and their
+#: mean reads better. Measured with the installed chain through ``svbrdf capture`` (``--refine 60``,
+#: ``docs/training.md``, "Passes"): Des19 normal 0.0530 -> 0.0527, relief 0.351 -> 0.361, diffuse
+#: 0.0364 -> 0.0361, roughness 0.1106 -> 0.1077, specular 0.0574 -> 0.0578; the card 0.1261 -> 0.1259;
+#: the 48 generated known-light captures 0.0731 -> 0.0722. Mirrored passes read Des19 as well but the
+#: card worse (0.1282-0.1286).
+PASSES = ((0, False), (2, False))
 #: How far round the pixels it fills :func:`fill_highlight` reaches, as a share of the width.
 FILL_MARGIN = 0.01
 #: The chain's highlight mask ``M_h`` (luminance) above which :func:`fill_highlight` fills the diffuse.
@@ -209,6 +218,7 @@ class SwiftModel:
         self.tier = meta.get("tier", "swift")
         self.timings = {}
         self.found = self.fit = None
+        self.passes = PASSES
 
     @property
     def used(self):
@@ -264,31 +274,39 @@ class SwiftModel:
             s = self.run_size / max(full)
             img = shrink_to(img, (max(1, round(full[0] * s)), max(1, round(full[1] * s))))
         h, w = img.shape[:2]
-        ctx = flash_fields.context(light, h, w)
-        base = flash_fields.base(img, light)
         t1 = time.perf_counter()
         m, pad, mode = padding(h, w, self.multiple, MARGIN)
 
         def feed(x):
             return np.ascontiguousarray(np.pad(x, pad, mode=mode).transpose(2, 0, 1)[None], dtype=np.float32)
 
-        masks, aux, maps = self.forward({"photo": feed(img), "context": feed(ctx), "base": feed(base)})
-        self.timings = {"physical": t1 - t0, "chain": time.perf_counter() - t1}
+        def own(x):  # the margin off, (h, w, C)
+            return x[0].transpose(1, 2, 0)[m:m + h, m:m + w]
 
-        def crop(x, interpolation=cv2.INTER_CUBIC):
-            x = np.ascontiguousarray(x[0].transpose(1, 2, 0)[m:m + h, m:m + w])
+        total = None
+        for k, mirror in self.passes:
+            seen, at = tta.transform_image(img, k, mirror), tta.transform_point(light, k, mirror)
+            masks, aux, maps = self.forward({"photo": feed(seen), "context": feed(flash_fields.context(at, h, w)),
+                                             "base": feed(flash_fields.base(seen, at))})
+            res = tta.untransform_maps(dict(zip(cv.MAP_NAMES, np.split(own(maps), [3, 6, 7], axis=-1))), k, mirror)
+            res["extra"] = tta.untransform_image(np.concatenate([own(masks), own(aux)], -1), k, mirror)
+            total = res if total is None else {n: total[n] + res[n] for n in total}
+        self.timings = {"physical": t1 - t0, "chain": time.perf_counter() - t1}
+        mean = {n: v / np.float32(len(self.passes)) for n, v in total.items()}
+
+        def full_size(x, interpolation=cv2.INTER_CUBIC):
+            x = np.ascontiguousarray(x, dtype=np.float32)
             if (h, w) != full:
                 x = np.clip(cv2.resize(x, (full[1], full[0]), interpolation=interpolation), 0.0, 1.0)
-            return x
+            return x.reshape(full + (-1,))
 
-        maps = crop(maps)
-        out = dict(zip(cv.MAP_NAMES, np.split(maps, [3, 6, 7], axis=-1)))
-        if (h, w) != full:
+        out = {n: full_size(mean[n]) for n in cv.MAP_NAMES}
+        if (h, w) != full or len(self.passes) > 1:  # resized or averaged: unit vectors again
             n = cv.decode_normals(out["normal"])
             n[..., 2] = np.maximum(n[..., 2], 1e-3)  # stay in the upper hemisphere
             out["normal"] = cv.encode_normals(cv.normalize(n)).astype(np.float32)
-        for name, x in (("masks", masks), ("aux", aux)):
-            x = crop(x, cv2.INTER_LINEAR)
-            out.update({k: x[..., 3 * i:3 * i + 3] for i, k in enumerate(OUTPUTS[name])})
+        extra = full_size(mean["extra"], cv2.INTER_LINEAR)
+        names = OUTPUTS["masks"] + OUTPUTS["aux"]
+        out.update({name: extra[..., 3 * i:3 * i + 3] for i, name in enumerate(names)})
         return out
 

@@ -56,6 +56,12 @@ def _turn_vectors(n, k, mirror, inverse=False):
     return n
 
 
+def transform_point(p, k, mirror):
+    """A point (x, y, z) in surface units (the crop spans [-1, 1]^2) where it lands when its photo is
+    transformed by :func:`transform_image` (the square turns and mirrors about its centre)."""
+    return _turn_vectors(np.asarray(p, np.float32), k, mirror).astype(np.float64)
+
+
 def transform_maps(stored, k, mirror):
     """Transform a stored map set (pixels and normal vectors) as its photo was transformed."""
     out = {name: transform_image(v, k, mirror) for name, v in stored.items()}

@@ -445,6 +445,7 @@ def test_the_runtime_runs_the_exported_chain_as_torch_does(tmp_path):
     folder = tmp_path / "swift"
     engine_onnx.export(net, str(folder / "chain.onnx"), provenance={"samples": 7})
     model = load_model(str(folder))
+    model.passes = ((0, False),)  # one pass: the network's own outputs (the averaging has its own test)
     g = torch.Generator().manual_seed(3)
     photo = (0.3 + 0.4 * torch.rand(1, 3, 96, 96, generator=g)).clamp(0, 1)
     img = photo[0].permute(1, 2, 0).numpy()
@@ -471,6 +472,38 @@ def test_the_runtime_runs_the_exported_chain_as_torch_does(tmp_path):
     assert {"M_b.png", "M_h.png", "I_bf.png", "I_hr.png", "I_hr2.png"} <= set(debug), debug
 
 
+def test_the_runtime_averages_the_photo_and_its_half_turn(tmp_path):
+    """The maps are the mean of the chain's on the photo and on the photo turned half round with its flash
+    turned alike (brought back), the normals unit vectors again."""
+    pytest.importorskip("onnxruntime")
+    from export.engine import onnx as engine_onnx
+    from svbrdf_cli.infer import tta
+    from svbrdf_cli.infer.registry import load_model
+    from svbrdf_cli.infer.swift import PASSES
+
+    assert PASSES == ((0, False), (2, False))
+    net = _speaking_net()
+    folder = tmp_path / "swift"
+    engine_onnx.export(net, str(folder / "chain.onnx"), provenance={})
+    model = load_model(str(folder))
+    g = torch.Generator().manual_seed(4)
+    img = (0.3 + 0.4 * torch.rand(96, 96, 3, generator=g)).numpy()
+    light = np.array([0.2, -0.3, 2.4])
+    model.flash = lambda image: light  # the flash given, so that each pass's is known exactly
+    both = model.network(img)
+    model.passes = ((0, False),)
+    plain = model.network(img)
+    model.flash = lambda image: tta.transform_point(light, 2, False)
+    turned = tta.untransform_maps({k: v for k, v in model.network(tta.transform_image(img, 2, False)).items()
+                                   if k in cv.MAP_NAMES}, 2, False)
+    for k in ("diffuse", "roughness", "specular"):
+        assert np.abs(both[k] - (plain[k] + turned[k]) / 2).max() < 1e-4, k
+    n = cv.normalize(cv.decode_normals((plain["normal"] + turned["normal"]) / 2))
+    assert np.abs(cv.decode_normals(both["normal"]) - n).max() < 1e-3
+    assert np.allclose(np.linalg.norm(cv.decode_normals(both["normal"]), axis=-1), 1.0, atol=1e-4)
+    assert np.abs(plain["diffuse"] - turned["diffuse"]).max() > 1e-3  # the passes differ: the test can fail
+
+
 def test_the_runtime_runs_the_chain_at_the_size_it_trained_at(tmp_path):
     """A photo larger than the run's image size is shrunk to it, and the maps come back to the photo's size."""
     pytest.importorskip("onnxruntime")
@@ -486,6 +519,7 @@ def test_the_runtime_runs_the_chain_at_the_size_it_trained_at(tmp_path):
     folder = tmp_path / "swift"
     engine_onnx.export(net, str(folder / "chain.onnx"), provenance={}, run_size=64)
     model = load_model(str(folder))
+    model.passes = ((0, False),)
     assert model.run_size == 64
     g = torch.Generator().manual_seed(5)
     img = (0.3 + 0.4 * torch.rand(128, 128, 3, generator=g)).numpy()
