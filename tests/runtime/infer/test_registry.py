@@ -11,6 +11,7 @@ import pytest
 
 from svbrdf_cli.infer.chain import MODELS_DIR, STAGES, TIERS, Chain, installed_tiers
 from svbrdf_cli.infer.registry import AUTO, DEFAULT_MODEL, load_model, model_names
+from svbrdf_cli.infer.refine import DEFAULT_ITERATIONS
 
 MB = 1_000_000
 
@@ -39,7 +40,7 @@ def test_the_default_is_the_installed_trained_chain_and_only_complete_tiers_are_
             assert model.tier == tier and model.provenance["samples"] == prov["samples_seen"] > 0
             assert model.provenance["step"] == prov["step"] and prov["cpu_hours"] > 0 and prov["data"]
             scores = prov["metrics_through_capture"]["des19_corrected_scorer"]
-            assert {"normal", "relief", "diffuse", "roughness", "specular"} <= set(scores[f"{tier}_refine_60_default"])
+            assert {"normal", "relief", "diffuse", "roughness", "specular"} <= set(scores[f"{tier}_refine_{DEFAULT_ITERATIONS}_default"])
             continue
         chain = Chain(folder)
         assert chain.stages in (STAGES, ("maps",)), tier  # the chain, or one end-to-end network
