@@ -109,7 +109,7 @@ _CAPTURE_OPTIONS = [
                                                   "first cut to whole repeats), so a tiling shows no seam."),
     click.option("--refine", type=click.IntRange(0, MAX_ITERATIONS), default=DEFAULT_ITERATIONS, show_default=True,
                  is_flag=False, flag_value=DEFAULT_ITERATIONS, metavar="[N]",
-                 help="Steps fitting the maps to the photo under its own flash (about 2.5 s; 0: off, the "
+                 help="Steps fitting the maps to the photo under its own flash (about 0.6 s; 0: off, the "
                       "model's maps as they are). See docs/capture.md."),
     click.option("--threads", type=click.IntRange(0, 256), default=0, help="onnxruntime threads (0: one per core)."),
     force_opt("existing texture sets (redo them)"),
