@@ -32,6 +32,7 @@ import numpy as np
 import torch
 
 from export.data import augment, procedural
+from export.data.noise import luminance
 from svbrdf_cli import conventions as cv
 
 SIZE = 256
@@ -195,11 +196,10 @@ def _grey(g, n):
     luminance) and a grey F0 (the luminance of theirs)."""
     maps, sources = _dark(g, n)
     d = maps["diffuse"]
-    lum = (d * d.new_tensor(cv.LUMA).reshape(1, 3, 1, 1)).sum(1, keepdim=True)
+    lum = luminance(d)
     keep = (torch.rand(n, generator=g) * GREY_CHROMA).reshape(-1, 1, 1, 1)
     maps["diffuse"] = (lum + keep * (d - lum)).clamp(0.0, 1.0)
-    f0 = maps["specular"]
-    maps["specular"] = (f0 * f0.new_tensor(cv.LUMA).reshape(1, 3, 1, 1)).sum(1, keepdim=True).expand_as(f0).clone()
+    maps["specular"] = luminance(maps["specular"]).expand_as(d).clone()
     return maps, ["grey:" + x.split(":", 1)[1] for x in sources]
 
 

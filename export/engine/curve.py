@@ -83,7 +83,7 @@ def _relighting(ax, pts, key, title):
     refined = [e for e in pts if e.get(f"{key}_refined")]
     if refined:
         ax.plot([e["samples"] / 1e3 for e in refined], [e[f"{key}_refined"] for e in refined], "s-", ms=3,
-                label="chain + --refine 60")
+                label="chain + --refine")
     ref = REFERENCE["default"][key]
     ax.axhline(ref, ls="--", c="grey", label=f"{LABELS['default']} {ref}")
     ax.set_title(title)

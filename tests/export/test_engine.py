@@ -95,32 +95,29 @@ def test_a_bank_grown_past_its_print_shards_holds_prints_and_keeps_its_earlier_s
     assert len(resumed.load_bank().sources) == 2 * bank_mod.SHARD
 
 
-def test_dark_shards_hold_dark_glossy_dielectrics(tmp_path, small_bank, monkeypatch):
-    monkeypatch.setattr(bank_mod, "PRINT_SHARDS", range(0))
-    monkeypatch.setattr(bank_mod, "DARK_SHARDS", range(2, 3))
+def _grown_with_shard(tmp_path, monkeypatch, kind):
+    """A bank of 3 shards whose third is of ``kind`` ("dark" or "grey"): (its manifest entry, its maps,
+    the first two shards' maps)."""
+    for name, k in (("PRINT_SHARDS", "print"), ("DARK_SHARDS", "dark"), ("GREY_SHARDS", "grey")):
+        monkeypatch.setattr(bank_mod, name, range(2, 3) if k == kind else range(0))
     root = str(tmp_path / "bank")
     bank_mod.grow(root, 3 * bank_mod.SHARD, progress=None)
-    shard = bank_mod.read_manifest(root)["shards"][2]
-    assert shard["kind"] == "dark" and all(x.startswith("dark:") for x in shard["sources"])
     bank = bank_mod.Bank(root)
-    dark = bank.maps(torch.arange(2 * bank_mod.SHARD, 3 * bank_mod.SHARD))
-    rest = bank.maps(torch.arange(0, 2 * bank_mod.SHARD))
+    return (bank_mod.read_manifest(root)["shards"][2], bank.maps(torch.arange(2 * bank_mod.SHARD, 3 * bank_mod.SHARD)),
+            bank.maps(torch.arange(0, 2 * bank_mod.SHARD)))
+
+
+def test_dark_shards_hold_dark_glossy_dielectrics(tmp_path, small_bank, monkeypatch):
+    shard, dark, rest = _grown_with_shard(tmp_path, monkeypatch, "dark")
+    assert shard["kind"] == "dark" and all(x.startswith("dark:") for x in shard["sources"])
     assert float(dark["diffuse"].mean()) < 0.3 * float(rest["diffuse"].mean())
     assert float(dark["roughness"].mean()) < float(rest["roughness"].mean())
     assert float(dark["specular"].amax()) < 0.1  # dielectrics only
 
 
 def test_grey_shards_hold_dark_grey_glossy_dielectrics(tmp_path, small_bank, monkeypatch):
-    monkeypatch.setattr(bank_mod, "PRINT_SHARDS", range(0))
-    monkeypatch.setattr(bank_mod, "DARK_SHARDS", range(0))
-    monkeypatch.setattr(bank_mod, "GREY_SHARDS", range(2, 3))
-    root = str(tmp_path / "bank")
-    bank_mod.grow(root, 3 * bank_mod.SHARD, progress=None)
-    shard = bank_mod.read_manifest(root)["shards"][2]
+    shard, grey, rest = _grown_with_shard(tmp_path, monkeypatch, "grey")
     assert shard["kind"] == "grey" and all(x.startswith("grey:") for x in shard["sources"])
-    bank = bank_mod.Bank(root)
-    grey = bank.maps(torch.arange(2 * bank_mod.SHARD, 3 * bank_mod.SHARD))
-    rest = bank.maps(torch.arange(0, 2 * bank_mod.SHARD))
 
     def chroma(d):  # mean distance of a colour from its grey, over its brightness
         return float((d - d.mean(1, keepdim=True)).abs().mean() / d.mean())
