@@ -67,8 +67,11 @@ def _setup(threads):
 @click.option("--bank-count", type=int, default=None,
               help="Grow the material bank to this many materials and train on them from now on "
                    "(default: the run's own).")
+@click.option("--weight", "weight_pairs", multiple=True, metavar="NAME=VALUE", callback=lambda ctx, p, v: _weights(v),
+              help="A maps-loss weight from now on (normal, diffuse, roughness, specular, relief, render; 0 drops "
+                   "the term), e.g. render=0.5; repeatable. The run keeps it.")
 def train(folder, threads, steps, minutes, checkpoint_minutes, eval_minutes, checkpoint, schedule, restart_stage,
-          bank_count):
+          bank_count, weight_pairs):
     """Train the swift chain in FOLDER, or resume it; SIGTERM/SIGINT save and exit 0."""
     import dataclasses
 
@@ -79,8 +82,13 @@ def train(folder, threads, steps, minutes, checkpoint_minutes, eval_minutes, che
     run = Run(folder, config=config, log=lambda m: click.echo(m, err=True), checkpoint=checkpoint)
     changes = {k: v for k, v in (("checkpoint_minutes", checkpoint_minutes), ("eval_minutes", eval_minutes),
                                  ("bank_count", bank_count)) if v is not None}
+    if weight_pairs:
+        changes["weights"] = tuple({**dict(run.config.weights), **weight_pairs}.items())
     if changes:
         run.config = dataclasses.replace(run.config, **changes)
+        run.net.loss_weights = dict(run.config.weights)
+        if weight_pairs:
+            click.echo(f"maps loss weights from step {run.step}: {dict(run.config.weights)}", err=True)
     if restart_stage:
         run.restart_stage(restart_stage)
         run.save()
@@ -88,6 +96,23 @@ def train(folder, threads, steps, minutes, checkpoint_minutes, eval_minutes, che
                f"{run.cpu / 3600:.2f} CPU h", err=True)
     run.train(steps=steps, minutes=minutes)
     click.echo(f"run {folder}: saved at step {run.step} ({run.samples} samples)", err=True)
+
+
+def _weights(pairs):
+    """``("render=0.5", ...)`` -> {name: weight} (names of :data:`export.engine.run.RunConfig.weights`' kinds)."""
+    from export.engine.run import EXTRA_TERMS
+    from svbrdf_cli.conventions import MAP_NAMES
+
+    out = {}
+    for pair in pairs:
+        name, _, value = pair.partition("=")
+        try:
+            out[name.strip()] = float(value)
+        except ValueError:
+            raise click.BadParameter(f"{pair!r}: write NAME=VALUE, e.g. render=0.5")
+        if name.strip() not in MAP_NAMES + EXTRA_TERMS or out[name.strip()] < 0:
+            raise click.BadParameter(f"{pair!r}: NAME is one of {', '.join(MAP_NAMES + EXTRA_TERMS)}, VALUE at least 0")
+    return out
 
 
 def _schedule(text):
@@ -112,7 +137,9 @@ def _schedule(text):
 @click.option("--restart-stage", type=click.Choice(["masks", "aux", "maps"]), default=None,
               help="Passed to train (once: a later resume goes on from the restarted stage).")
 @click.option("--bank-count", type=int, default=None, help="Passed to train: the bank's size from now on.")
-def background(folder, schedule, restart_stage, bank_count):
+@click.option("--weight", "weight_pairs", multiple=True, metavar="NAME=VALUE", callback=lambda ctx, p, v: (_weights(v), v)[1],
+              help="Passed to train: a maps-loss weight from now on, e.g. render=0.5; repeatable.")
+def background(folder, schedule, restart_stage, bank_count, weight_pairs):
     """Resume (or start) the run in FOLDER detached, on one core; its log is FOLDER/log.txt."""
     import os
     import subprocess
@@ -132,6 +159,7 @@ def background(folder, schedule, restart_stage, bank_count):
         args = [sys.executable, "-m", "export.engine", "train", "--run", folder, "--threads", "1"]
         args += (["--schedule", schedule] if schedule else []) + (["--restart-stage", restart_stage] if restart_stage else [])
         args += ["--bank-count", str(bank_count)] if bank_count else []
+        args += [a for pair in weight_pairs for a in ("--weight", pair)]
         p = subprocess.Popen(args,
                              stdout=log, stderr=log, stdin=subprocess.DEVNULL, start_new_session=True, env=env)
     with open(pid_file, "w") as f:

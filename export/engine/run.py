@@ -68,9 +68,10 @@ class RunConfig:
     real_fraction: float = 0.25
     real_weight: float = 1.0
     real_root: str | None = None
-    #: Maps loss weights: L1 of each map in its stored encoding, and ``relief``, the weight of the
-    #: tilt-correlation term (:func:`relief_loss`).
-    weights: tuple = (("normal", 2.0), ("diffuse", 1.0), ("roughness", 1.0), ("specular", 1.0), ("relief", 0.5))
+    #: Maps loss weights: L1 of each map in its stored encoding, ``relief``, the weight of the
+    #: tilt-correlation term (:func:`relief_loss`), and ``render``, of the rendering term (:func:`render_loss`).
+    weights: tuple = (("normal", 2.0), ("diffuse", 1.0), ("roughness", 1.0), ("specular", 1.0), ("relief", 0.5),
+                      ("render", 0.5))
     #: Decay per step of the moving average of the training stage's weights (:meth:`Run.averaged`),
     #: the weights evaluated and exported; 0: none.
     ema_decay: float = 0.9995
@@ -117,12 +118,72 @@ def net_weights(net):
     return getattr(net, "loss_weights", dict(RunConfig.weights))
 
 
+#: Terms of :func:`maps_loss` that are not one map's L1.
+EXTRA_TERMS = ("relief", "render")
+#: :func:`render_loss` renders the maps at this side (area-averaged down from the batch's): 4x cheaper
+#: than at 128², and what relighting errors are made of (a highlight's level and spread) is broader.
+RENDER_SIDE = 64
+#: Lights (and views) of each of :func:`render_views`' three configurations.
+RENDER_EACH = 3
+
+
 def maps_loss(pred, target, weights):
-    """L1 of each map (stored encodings) plus ``weights["relief"]`` times :func:`relief_loss`."""
-    loss = sum(w * (pred[k].float() - target[k]).abs().mean() for k, w in weights.items() if k != "relief")
+    """L1 of each map (stored encodings) plus ``weights["relief"]`` times :func:`relief_loss` and, when the
+    batch carries ``lights`` and ``cameras`` (:func:`render_views`; training batches do, validation ones
+    not), ``weights["render"]`` times :func:`render_loss`."""
+    loss = sum(w * (pred[k].float() - target[k]).abs().mean() for k, w in weights.items() if k not in EXTRA_TERMS)
     if weights.get("relief"):
         loss = loss + weights["relief"] * relief_loss(pred["normal"].float(), target["normal"])
+    if weights.get("render") and "lights" in target:
+        loss = loss + weights["render"] * render_loss(pred, target, target["lights"], target["cameras"])
     return loss
+
+
+def render_views(g, batch):
+    """(L, B, 3) light and camera positions for :func:`render_loss`, :data:`RENDER_EACH` of each kind:
+
+    * the paper's (Eq. 18, Des18's draws): light and view each from the hemisphere, cosine-distributed,
+      2-5 half-widths away (:func:`export.losses.random_light_views`);
+    * Des18's specular kind: the view the light's mirror image, shifted by up to half a half-width, so
+      the highlight shows in the frame;
+    * a flash camera above the surface (its height 0.8-1.2 times the conventions', off centre by up to
+      0.3) with the light beside the lens, 0-0.22 of the height away and 0.98-1.13 of it high: the
+      geometry of a capture under known lights (``export/engine/known_lights.py``), and of a phone's
+      flash seen from a little off its lens.
+    """
+    from export.losses import random_light_views
+
+    def u(*shape):
+        return torch.rand(*shape, generator=g, dtype=torch.float32)
+
+    n = RENDER_EACH
+    lights_a, cams_a = random_light_views(batch, n, generator=g)
+    lights_b, _ = random_light_views(batch, n, generator=g)
+    shift = torch.cat([(u(n, batch, 2) - 0.5), torch.zeros(n, batch, 1)], -1)
+    cams_b = lights_b * torch.tensor([-1.0, -1.0, 1.0]) + shift
+    h = cv.CAMERA_HEIGHT * (0.8 + 0.4 * u(n, batch, 1))
+    cams_c = torch.cat([(u(n, batch, 2) - 0.5) * 0.6, h], -1)
+    angle, radius = u(n, batch, 1) * (2 * math.pi), u(n, batch, 1) * 0.22 * h
+    lights_c = cams_c * torch.tensor([1.0, 1.0, 0.0]) + torch.cat(
+        [radius * angle.cos(), radius * angle.sin(), h * (0.98 + 0.15 * u(n, batch, 1))], -1)
+    return torch.cat([lights_a, lights_b, lights_c]), torch.cat([cams_a, cams_b, cams_c])
+
+
+def render_loss(pred, target, lights, cameras, side=RENDER_SIDE):
+    """Mean L1 of log renderings (log(x + 0.01), the paper's and Des18's) of the predicted against the
+    true maps under each light and view of ``lights``/``cameras`` (L, B, 3), the maps area-averaged to
+    ``side``. The whole predicted set is rendered at once (not one map at a time with the true others, as
+    the paper's Eq. 18): relighting is what the known-light captures and the card score, and the L1 terms
+    hold each map."""
+    from export.losses import rendering_loss
+
+    def linear(maps):
+        down = {k: maps[k].float() for k in cv.MAP_NAMES}
+        if down["normal"].shape[-1] > side:
+            down = {k: F.adaptive_avg_pool2d(v, side) for k, v in down.items()}
+        return cv.decode_maps(down, axis=1)
+
+    return rendering_loss(linear(pred), linear(target), lights, cameras)
 
 
 def relief_loss(pred, target):
@@ -294,7 +355,10 @@ class Run:
         if real:
             loss = c.real_weight * real_loss(self.net, self.real.batch(self.g, c.batch, c.size))
         else:
-            loss = stage_loss(self.net, self.stage, batches.make(bank, self.g, c.batch, c.size, self.stage))
+            b = batches.make(bank, self.g, c.batch, c.size, self.stage)
+            if self.stage == "maps" and dict(c.weights).get("render"):
+                b["lights"], b["cameras"] = render_views(self.g, c.batch)
+            loss = stage_loss(self.net, self.stage, b)
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         self.optimizer.step()

@@ -74,15 +74,16 @@ def row(method, steps, errors, floor):
             "count": int(len(errors)), "per_capture": [round(float(e), 5) for e in errors]}
 
 
-def run(caps, zoo, settings=(0, DEFAULT_ITERATIONS), log=print):
+def run(caps, zoo, settings=(0, DEFAULT_ITERATIONS), log=print, priors=None):
     """Rows (:func:`row`) of the floor, the true maps and each method of ``zoo`` at each ``--refine``
-    setting of ``settings`` on the captures ``caps``."""
+    setting of ``settings`` on the captures ``caps`` (``priors``: :class:`svbrdf_cli.infer.refine.Priors`
+    other than the default's)."""
     images = [photo_input(c) for c in caps]
     floor = [score(method_zoo.Floor()(im), c) for im, c in zip(images, caps)]
     rows = [row("floor", None, floor, None), row("truth", None, [score(c["truth"], c) for c in caps], floor)]
     for m in zoo:
         once, t0 = Once(m), time.perf_counter()
-        runners = [(n, method_zoo.Refined(once, n) if n else once) for n in settings]
+        runners = [(n, method_zoo.Refined(once, n, priors=priors) if n else once) for n in settings]
         errors = {n: [] for n in settings}
         for im, c in zip(images, caps):
             for n, f in runners:
@@ -123,14 +124,19 @@ def methods_to_run(names=None, extra=()):
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None)
 @click.option("--cache", "cache_dir", default=CACHE_DIR, show_default=True, type=click.Path(file_okay=False),
               help="Where the captures are kept between runs.")
-def cli(count, methods, extra, steps, seed, json_out, cache_dir):
+@click.option("--prior", "prior_pairs", multiple=True, metavar="NAME=VALUE",
+              help="A --refine prior weight other than the default's (svbrdf_cli.infer.refine.Priors); repeatable.")
+def cli(count, methods, extra, steps, seed, json_out, cache_dir, prior_pairs):
+    from export.studies.refine_eval import parse_priors
+
     torch.set_num_threads(1)
+    priors = parse_priors(prior_pairs)
     t0 = time.perf_counter()
     with command_errors():
         zoo = methods_to_run(methods.split(",") if methods else None, extra)
         caps = captures(count, seed, SIZE, cache_dir, log=click.echo)
         click.echo(f"{count} captures of seed {seed} ready in {time.perf_counter() - t0:.0f} s")
-        rows = run(caps, zoo, (0, steps) if steps else (0,), log=click.echo)
+        rows = run(caps, zoo, (0, steps) if steps else (0,), log=click.echo, priors=priors)
     click.echo(table(rows))
     click.echo(f"({time.perf_counter() - t0:.0f} s in all)")
     if json_out:

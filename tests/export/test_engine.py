@@ -351,6 +351,51 @@ def test_the_relief_term_rewards_the_tilt_pattern_at_any_depth():
     assert float(relief_loss(flipped, truth)) > 1.99
 
 
+def test_the_render_term_scores_the_maps_relit_and_trains_the_roughness():
+    from export.engine.run import RENDER_EACH, render_loss, render_views
+
+    g = torch.Generator().manual_seed(0)
+    lights, cameras = render_views(g, 2)
+    assert lights.shape == cameras.shape == (3 * RENDER_EACH, 2, 3)
+    assert bool((lights[..., 2] > 0).all() and (cameras[..., 2] > 0).all())  # all above the surface
+    tilt = torch.randn(2, 2, 128, 128, generator=g) * 0.1
+    truth = {"normal": cv.encode_normals(cv.normalize(torch.cat([tilt, torch.ones(2, 1, 128, 128)], 1), axis=1)),
+             "diffuse": torch.full((2, 3, 128, 128), 0.5), "roughness": torch.full((2, 1, 128, 128), 0.3),
+             "specular": torch.full((2, 3, 128, 128), 0.2)}
+    assert float(render_loss(truth, truth, lights, cameras)) < 1e-6
+    rough = torch.full((2, 1, 128, 128), 0.7, requires_grad=True)
+    loss = render_loss(dict(truth, roughness=rough), truth, lights, cameras)
+    loss.backward()
+    assert float(loss) > 0.01
+    assert float(rough.grad.sum()) > 0  # lowering the too-rough map lowers the loss
+    # validation batches carry no lights: the term is left out, so the validation loss keeps its meaning
+    from export.engine.run import maps_loss
+
+    weights = {"roughness": 1.0, "render": 0.5}
+    with_lights = dict(truth, lights=lights, cameras=cameras)
+    plain = float(maps_loss(dict(truth, roughness=rough), truth, weights))
+    assert plain == pytest.approx(0.4, abs=1e-5)
+    assert float(maps_loss(dict(truth, roughness=rough), with_lights, weights)) == pytest.approx(plain + 0.5 * float(loss))
+
+
+def test_a_weight_given_on_resume_is_the_runs_from_then_on(tmp_path, small_bank):
+    from click.testing import CliRunner
+
+    from export.engine.cli import main
+
+    run = _run(tmp_path / "run", small_bank)
+    run.train(steps=6, evaluate=False)  # into the maps stage
+    run.save()
+    del run
+    res = CliRunner().invoke(main, ["train", "--run", str(tmp_path / "run"), "--steps", "1", "--checkpoint", "",
+                                    "--weight", "render=0.25", "--weight", "relief=0"])
+    assert res.exit_code == 0, res.output
+    again = Run(str(tmp_path / "run"), log=lambda m: None, des19=[])
+    assert dict(again.config.weights) == dict(CFG.weights, render=0.25, relief=0.0) and again.step == 7
+    res = CliRunner().invoke(main, ["train", "--run", str(tmp_path / "run"), "--weight", "shading=1"])
+    assert res.exit_code == 2 and "NAME is one of" in res.output
+
+
 def test_sigterm_saves_and_exits_zero(tmp_path, small_bank):
     folder = tmp_path / "run"
     code = (

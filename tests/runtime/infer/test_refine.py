@@ -445,3 +445,23 @@ def test_the_fill_gives_the_clipped_region_its_surroundings_tilt_too():
     p["tilt"][unobserved] = 0.0  # ...but not what the photo clipped
     out = refine._fill_unobserved(start, p, unobserved, refine._radial(side, (0.0, 0.0)), (0.0, 0.0))
     assert np.allclose(out["tilt"][unobserved, 0], 0.1, atol=1e-3)  # no outline of the clipped region left
+
+
+def test_the_tilt_priors_hold_the_starts_relief_not_flatness():
+    """A start with relief (the chain's) costs nothing to keep: no prior pulls it towards up; a broad
+    change of tilt away from any start costs more than a fine one of the same size."""
+    rng = np.random.default_rng(3)
+    side = 32
+    tilts = refine.Priors(**dict({f: 0.0 for f in refine.Priors.__dataclass_fields__}, normal=1.0, broad_tilt=10.0))
+    prob, init = _problem(rng, side=side, priors=tilts)
+    prob.weight = np.zeros_like(prob.weight)  # the priors alone
+    y, x = np.mgrid[0:side, 0:side] / side
+    bump = np.stack([np.sin(2 * np.pi * x), np.cos(2 * np.pi * y)], -1).astype(np.float32) * 0.3
+    init["tilt"] = prob.init["tilt"] = bump
+    cost, _, g = prob(dict(init))
+    assert cost == pytest.approx(0.0, abs=1e-9) and np.abs(g["tilt"]).max() < 1e-9
+    fine = np.where((np.indices((side, side)).sum(0) % 2)[..., None] == 0, 0.1, -0.1).astype(np.float32)
+    broad = np.full_like(fine, 0.1)
+    cost_fine = prob(dict(init, tilt=bump + fine))[0]
+    cost_broad = prob(dict(init, tilt=bump + broad))[0]
+    assert cost_broad > 3 * cost_fine > 0
