@@ -54,6 +54,13 @@ MARGIN = 32
 #: the 48 generated known-light captures 0.0731 -> 0.0722. Mirrored passes read Des19 as well but the
 #: card worse (0.1282-0.1286).
 PASSES = ((0, False), (2, False))
+#: The maps whose trend with the distance to the flash's foot is divided out (:func:`flatten_flash_trends`).
+#: The specular too: on a speaker grille (``paper_real`` IMG_7381) the chain's F0 held a pale disc round
+#: the flash, which the glTF preset turned into a metallic disc (mean metallic 0.117, 0.034 with F0
+#: flattened) and a base colour 2.7 times brighter in the flash spot than round it (0.94). Measured through
+#: ``svbrdf capture``: Des19 specular 0.0578 -> 0.0579, relighting 0.0577 -> 0.0576, the card 0.1260 ->
+#: 0.1262, the 48 generated known-light captures 0.0719 -> 0.0718.
+FLATTENED = ("diffuse", "specular")
 #: How far round the pixels it fills :func:`fill_highlight` reaches, as a share of the width.
 FILL_MARGIN = 0.01
 #: The chain's highlight mask ``M_h`` (luminance) above which :func:`fill_highlight` fills the diffuse.
@@ -113,11 +120,11 @@ def fill_highlight(diffuse, image, highlight=None):
 
 
 def flatten_flash_trends(stored, rho, names=("diffuse", "roughness")):
-    """The diffuse and (when ``names`` holds it) the roughness (stored maps) with any trend in the distance ``rho`` to the
-    flash's foot divided out (:func:`svbrdf_cli.infer.physical.flatten_radial`, the physical
-    estimate's last step), their mean level kept.
+    """The maps of ``names`` among the diffuse, the specular and the roughness (stored maps) with any trend
+    in the distance ``rho`` to the flash's foot divided out (:func:`svbrdf_cli.infer.physical.flatten_radial`,
+    the physical estimate's last step), their mean level kept.
 
-    Neither has a reason to change with where the flash happened to point; the chain leaves such
+    None has a reason to change with where the flash happened to point; the chain leaves such
     trends where it reads the highlight's surroundings differently from the rest (a pale or dark
     spot in the diffuse, a glossier blob in the roughness, seen on real photos). Measured on Des19
     through the capture path (the run's chain at 987k samples): diffuse RMSE 0.0444 -> 0.0403,
@@ -127,6 +134,9 @@ def flatten_flash_trends(stored, rho, names=("diffuse", "roughness")):
 
     d = cv.albedo_to_linear(stored["diffuse"])
     out = {"diffuse": cv.albedo_to_stored(np.clip(flatten_radial(d, rho), 0.0, 1.0)).astype(np.float32)}
+    if "specular" in names:
+        f0 = cv.albedo_to_linear(stored["specular"])
+        out["specular"] = cv.albedo_to_stored(np.clip(flatten_radial(f0, rho), 0.0, 1.0)).astype(np.float32)
     if "roughness" in names:
         r = np.repeat(stored["roughness"], 3, -1)
         out["roughness"] = np.clip(flatten_radial(r, rho)[..., :1], 0.0, 1.0).astype(np.float32)
@@ -251,7 +261,7 @@ class SwiftModel:
         out = self.network(image)
         t0 = time.perf_counter()
         out["diffuse"] = fill_highlight(out["diffuse"], image, out["M_h"])
-        out["diffuse"] = flatten_flash_trends(out, self.fit.rho, ("diffuse",))["diffuse"]
+        out.update(flatten_flash_trends(out, self.fit.rho, FLATTENED))
         out["roughness"] = roughness_from_observed(out["roughness"], out["diffuse"], out["M_h"])
         self.timings["physics"] = time.perf_counter() - t0
         return out

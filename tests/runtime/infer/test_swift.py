@@ -34,6 +34,24 @@ def test_a_pale_spot_and_a_glossy_blob_at_the_flash_are_taken_off_and_the_textur
     assert out["diffuse"].dtype == out["roughness"].dtype == np.float32
 
 
+def test_a_pale_f0_disc_at_the_flash_is_taken_off_as_the_runtime_runs_it():
+    """The runtime flattens the specular too (``FLATTENED``): a pale F0 disc round the flash was a
+    metallic disc and a bright base colour in the glTF preset."""
+    from svbrdf_cli.infer.swift import FLATTENED
+
+    rho = _rho()
+    g = np.random.default_rng(2)
+    stored = _stored(np.full(rho.shape + (3,), 0.3), np.full(rho.shape + (1,), 0.4))
+    speckle = 0.04 * (1 + 0.3 * g.standard_normal(rho.shape))[..., None]
+    f0 = speckle * (1 + 3.0 * np.exp(-(rho / 0.3) ** 2))[..., None]
+    stored["specular"] = cv.albedo_to_stored(np.repeat(f0, 3, -1)).astype(np.float32)
+    out = flatten_flash_trends(stored, rho, FLATTENED)
+    s = cv.albedo_to_linear(out["specular"])[..., 0]
+    near, far = rho < 0.2, rho > 0.8
+    assert "specular" in FLATTENED and 0.9 < s[near].mean() / s[far].mean() < 1.1  # it was about 3.5x
+    assert np.corrcoef(s.ravel(), speckle[..., 0].ravel())[0, 1] > 0.9  # the speckle stays
+
+
 def test_maps_without_a_flash_trend_are_kept():
     rho = _rho()
     g = np.random.default_rng(1)
