@@ -21,7 +21,8 @@ from svbrdf_cli import conventions as cv
 BASELINES_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "weights", "baselines")
 #: The paper's published time per image (GPU, 256²), quoted beside its accuracy.
 PAPER_GPU_SECONDS = 0.107
-TIER_LABELS = {"lite": "lite tier (one small end-to-end UNet)"}
+TIER_LABELS = {"lite": "lite tier (one small end-to-end UNet)",
+               "swift": "swift: the trained masks -> aux -> maps chain, on the photo and its half turn"}
 
 
 class Floor:
@@ -132,8 +133,9 @@ def auto_rule():
 
 def available(threads=0, refined=False):
     """Runnable methods, cheapest kind first: floor, the physical estimate (and, with ``refined``, the
-    physical estimate with ``--refine``'s default steps: what ``svbrdf capture`` runs by default), the
-    end-to-end baseline, every installed tier, auto."""
+    physical estimate with ``--refine``'s default steps: ``--model physical``), the end-to-end baseline,
+    every installed tier (with ``refined``, each also followed by ``--refine``'s default steps: for the
+    default tier, what ``svbrdf capture`` runs by default), auto."""
     from svbrdf_cli.infer.chain import MODELS_DIR, installed_tiers
 
     out = [Floor(), Physical()]
@@ -144,8 +146,10 @@ def available(threads=0, refined=False):
     e2e = os.path.join(BASELINES_DIR, "e2e-fast")
     if os.path.isfile(os.path.join(e2e, "maps.onnx")):
         out.append(Network("e2e", e2e, "end-to-end UNet (input -> maps, fast-tier parameters)", threads))
-    out += [Network(t, os.path.join(MODELS_DIR, t), TIER_LABELS.get(t, f"chain, {t} tier"), threads)
-            for t in installed_tiers()]
+    for t in installed_tiers():
+        out.append(Network(t, os.path.join(MODELS_DIR, t), TIER_LABELS.get(t, f"chain, {t} tier"), threads))
+        if refined:
+            out.append(Refined(out[-1], DEFAULT_ITERATIONS))
     rule = auto_rule()
     if rule is not None:
         out.append(Auto(rule, threads))
