@@ -235,7 +235,9 @@ def test_confidence_of_the_default_model_is_written_for_every_map_and_not_all_wh
     assert sorted(os.listdir(folder / "confidence")) == sorted(f"{k}.png" for k in cv.MAP_NAMES)
     for k in cv.MAP_NAMES:
         c = read_image(folder / "confidence" / f"{k}.png")
-        assert c.min() < 0.9 * c.max(), k  # it was: every pixel 255
+        # it was: every pixel 255. Some pixels show the passes disagreeing (grey); the specular, whose
+        # trend with the distance to the flash the runtime divides out, disagrees least (2.6 % of its pixels)
+        assert (c < 0.98 * c.max()).mean() > 0.01, k
 
 
 def test_confidence_of_the_physical_estimate_says_where_the_photo_shows_the_maps(tmp_path):
