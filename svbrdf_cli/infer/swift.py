@@ -132,11 +132,8 @@ def flatten_flash_trends(stored, rho, names=("diffuse", "roughness")):
     0.1449 -> 0.1416."""
     from svbrdf_cli.infer.physical import flatten_radial
 
-    d = cv.albedo_to_linear(stored["diffuse"])
-    out = {"diffuse": cv.albedo_to_stored(np.clip(flatten_radial(d, rho), 0.0, 1.0)).astype(np.float32)}
-    if "specular" in names:
-        f0 = cv.albedo_to_linear(stored["specular"])
-        out["specular"] = cv.albedo_to_stored(np.clip(flatten_radial(f0, rho), 0.0, 1.0)).astype(np.float32)
+    out = {k: cv.albedo_to_stored(np.clip(flatten_radial(cv.albedo_to_linear(stored[k]), rho), 0.0, 1.0)).astype(np.float32)
+           for k in ("diffuse", "specular") if k in names}  # the albedos, in linear units
     if "roughness" in names:
         r = np.repeat(stored["roughness"], 3, -1)
         out["roughness"] = np.clip(flatten_radial(r, rho)[..., :1], 0.0, 1.0).astype(np.float32)
