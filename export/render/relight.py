@@ -50,12 +50,13 @@ class NineLights:
         m = {k: torch.from_numpy(np.ascontiguousarray(v)).permute(2, 0, 1)[None].float() for k, v in lin.items()}
         return render_maps(m, light=self.lights[i], camera=self.lights[i], intensity=1.0)[0].permute(1, 2, 0).numpy()
 
-    def relight_rmse(self, stored):
-        """Mean RMSE over photos 01-08 of renders lit as they were, at the intensity fitted on photo 00."""
+    def relight_rmse(self, stored, source=0):
+        """Mean RMSE over the other photos of renders lit as they were, at the intensity fitted on photo
+        ``source`` (the one the maps were made from; 00 by default)."""
         lin = stored_to_linear(stored)
-        k = fit_intensity(self._render(lin, 0), self.photos[0])
+        k = fit_intensity(self._render(lin, source), self.photos[source])
         errs = []
-        for i in range(1, len(self.photos)):
+        for i in (j for j in range(len(self.photos)) if j != source):
             ok = (self.photos[i] < 0.98).all(-1)
             pred = cv.image_to_encoded(self._render(lin, i) * k)
             errs.append(float(np.sqrt(((pred - self.photos[i])[ok] ** 2).mean())))
