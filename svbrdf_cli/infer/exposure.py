@@ -40,20 +40,20 @@ def network_input(linear, gain_ev=None):
     return ingest.encode_for_network(low, 2.0 ** gain_ev)
 
 
-#: The albedo convention of ``svbrdf capture`` (``docs/conventions.md``, "The albedo level"): a diffuse
-#: read at the flash power :data:`svbrdf_cli.conventions.FLASH_INTENSITY` from the photo as exposed for
-#: the networks is scaled to the photo's own level, de-lit: the highlight taken off and every pixel lit
-#: as the point straight under the flash. This is the factor at that point (the flat surface's
-#: shading there, ``1 / CAMERA_HEIGHT^2`` at any fitted flash height, times the flash power and the
-#: share ``1 - F0`` the diffuse lobe keeps).
-DELIT_FACTOR = cv.FLASH_INTENSITY * (1.0 - cv.DIELECTRIC_F0) / cv.CAMERA_HEIGHT ** 2
+#: The albedo convention of ``svbrdf capture`` (``docs/conventions.md``, "The albedo level"): the photo as
+#: shot read at the flash power :data:`svbrdf_cli.conventions.FLASH_INTENSITY` (the Des19 inputs' own, the
+#: paper's and MaterialGAN's reading). A white diffuse surface straight under that flash photographs at
+#: this linear value (its shading there, ``1 / CAMERA_HEIGHT^2``, times the flash power and the share
+#: ``1 - F0`` the diffuse lobe keeps): a photo's value ``v`` under the flash reads as albedo
+#: ``v / WHITE_UNDER_FLASH``.
+WHITE_UNDER_FLASH = cv.FLASH_INTENSITY * (1.0 - cv.DIELECTRIC_F0) / cv.CAMERA_HEIGHT ** 2
 
 
 def photo_level(gain_ev, manual=False):
-    """The factor taking a diffuse read at the convention's flash power, from the photo exposed by
-    ``gain_ev`` stops, to the photo's own level de-lit (:data:`DELIT_FACTOR`): the photo as shot, or with
-    ``manual`` (``--exposure STOPS``) the photo as the user exposed it."""
-    return float(DELIT_FACTOR * (1.0 if manual else 2.0 ** -gain_ev))
+    """The factor taking a diffuse read at the convention's flash power from the photo exposed by
+    ``gain_ev`` stops back to the photo as shot (``2^-gain_ev``), or with ``manual``
+    (``--exposure STOPS``) keeping the photo as the user exposed it (1)."""
+    return float(1.0 if manual else 2.0 ** -gain_ev)
 
 
 def to_photo_level(stored, scale):

@@ -70,6 +70,12 @@ HIGHLIGHT_MASK = 0.15
 MAX_MASK_SHARE = 0.5
 
 
+#: A clipped pixel hides the albedo only where it is white: its darkest channel at least this share of
+#: the clip level (a highlight's colour is the flash's). Measured on ``paper_real`` 7F1A4436: yellow
+#: paint clipped in red and green kept its colour instead of a grey veil.
+WHITE_CLIP = 0.6
+
+
 def fill_highlight(diffuse, image, highlight=None):
     """The stored ``diffuse`` filled from its surroundings where the highlight hid the albedo: where
     the encoded ``image`` is clipped (at its plateau, :func:`svbrdf_cli.conventions.clip_level`) and
@@ -97,7 +103,10 @@ def fill_highlight(diffuse, image, highlight=None):
     from svbrdf_cli.infer.physical import CLIPPED, relative_texture, texture_beside
 
     img = np.asarray(image, np.float32)
-    clipped = (img >= CLIPPED * cv.clip_level(img)).any(-1)  # at the plateau an exposure darkened
+    level = cv.clip_level(img)
+    # at the plateau an exposure darkened, and white: a saturated colour clipped in one or two channels
+    # (yellow paint) is the albedo, not a highlight
+    clipped = (img >= CLIPPED * level).any(-1) & (img.min(-1) >= WHITE_CLIP * level)
     mask = clipped.copy()
     if highlight is not None:
         marked = luminance(np.asarray(highlight, np.float32)) > HIGHLIGHT_MASK

@@ -41,7 +41,8 @@ from svbrdf_cli.write import ownership
 from svbrdf_cli.ingest import plausible
 from svbrdf_cli.errors import SvbrdfError
 from svbrdf_cli.imageops import resize
-from svbrdf_cli.infer.exposure import NETWORK_SIZE, auto_exposure_gain, network_input, photo_level, to_photo_level
+from svbrdf_cli.infer.exposure import (NETWORK_SIZE, WHITE_UNDER_FLASH, auto_exposure_gain, network_input, photo_level,
+                                       to_photo_level)
 from svbrdf_cli.infer.tta import confidence_maps
 from svbrdf_cli.infer.upsample import upsample_maps
 from svbrdf_cli.write.preview import preview_image
@@ -243,7 +244,7 @@ def infer_set(prepared, chain, out_root, opts, model_name="physical", progress=N
         if not np.isfinite(v).all():
             raise SvbrdfError(f"The model produced non-finite values for '{p.path}' ({k}); please report this photo.")
     plausible.check_maps(p.path, net_in, stored, chain.describe().get("found"))
-    # the albedo at the photo's own level, de-lit (docs/conventions.md, "The albedo level")
+    # the albedo of the photo as shot (docs/conventions.md, "The albedo level")
     level = photo_level(p.gain_ev, manual=opts.exposure is not None)
     stored = to_photo_level(stored, level)
     maps = None  # linear maps, made only where needed (the native preset writes the stored ones)
@@ -274,10 +275,9 @@ def infer_set(prepared, chain, out_root, opts, model_name="physical", progress=N
         "crop": _jsonable(p.crop.report),
         "exposure": {"mode": "auto" if opts.exposure is None else "manual", "stops": round(p.gain_ev, 3)},
         "albedo_level": {"scale": round(level, 6),
-                         "convention": "the photo's own level de-lit (" + ("as shot" if opts.exposure is None
-                                                                            else "at --exposure") +
-                                       "): diffuse = photo less highlight over the flash's fall-off, 1 straight "
-                                       "under the flash (docs/conventions.md)"},
+                         "convention": "the photo " + ("as shot" if opts.exposure is None else "at --exposure") +
+                                       ", de-lit and read at the Des19 flash power: a white surface under the "
+                                       f"flash photographs at {WHITE_UNDER_FLASH:.3f} (docs/conventions.md)"},
         "white_balance": list(opts.white_balance) if opts.white_balance else None,
         "network_size": NETWORK_SIZE, "size": side,
         "upsampling": upsampling,

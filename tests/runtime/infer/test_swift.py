@@ -85,6 +85,21 @@ def test_the_diffuse_under_a_clipped_highlight_is_filled_from_around_it():
     assert np.array_equal(same, cv.albedo_to_stored(diffuse).astype(np.float32))
 
 
+def test_a_colour_clipped_in_some_channels_is_kept_and_a_white_clip_is_filled():
+    from svbrdf_cli.infer.swift import fill_highlight
+
+    n = 96
+    hole = _rho(n, foot=(0.0, 0.0)) < 0.15
+    yellow = np.float32([0.7, 0.6, 0.05])  # paint, clipped in red and green under the flash
+    diffuse = np.where(hole[..., None], yellow, np.float32([0.2, 0.2, 0.2])).astype(np.float32)
+    stored = cv.albedo_to_stored(diffuse).astype(np.float32)
+    paint = np.where(hole[..., None], np.float32([1.0, 1.0, 0.3]), np.float32(0.5)).astype(np.float32)
+    assert np.array_equal(fill_highlight(stored, paint), stored)
+    white = np.where(hole[..., None], np.ones(3, np.float32), np.float32(0.5)).astype(np.float32)
+    filled = cv.albedo_to_linear(fill_highlight(stored, white))
+    assert np.abs(filled[hole].mean(0) - 0.2).max() < 0.05  # a white clip hid the albedo: filled from around
+
+
 def test_the_diffuse_under_the_chains_highlight_mask_is_filled_too():
     from svbrdf_cli.infer.swift import fill_highlight
 
