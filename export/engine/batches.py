@@ -114,6 +114,21 @@ def tint(maps, g, hue=0.05, saturation=(0.8, 1.5), brightness=0.3):
     return out
 
 
+#: The most of a photo lit at a fixed flash power that may clip (any channel at white): a brighter one is
+#: exposed down to it, as a phone's exposure would. Uncapped, that half of the photos clipped up to 92 %
+#: of their pixels (p90 0.41 on fresh procedural materials); Des19's inputs clip at most 12.6 %, the
+#: real flash photos 1.2 % at p90.
+MAX_CLIPPED_SHARE = 0.1
+
+
+def highlight_cap(unit):
+    """(B,) the largest intensity at which at most :data:`MAX_CLIPPED_SHARE` of a (B, 3, H, W)
+    unit-intensity render's pixels reach white in any channel."""
+    top = unit.amax(1).flatten(1).float()
+    q = torch.quantile(top, 1.0 - MAX_CLIPPED_SHARE, dim=1).to(unit.dtype)
+    return 1.0 / q.clamp_min(1e-8)
+
+
 def photograph(maps, capture, g):
     """The simulated photo of a batch (:func:`export.data.simulate.photograph`'s camera model, with
     one render and auto exposure on a subsample): ``photo``, the clean ``linear`` flash image, ``intensity`` (B,)."""
@@ -122,7 +137,7 @@ def photograph(maps, capture, g):
     unit = render_maps(maps, light=light, camera=cam, intensity=1.0)
     intensity = render_targets.exposure_of(unit[..., ::4, ::4], capture["exposure"].to(d), iterations=20)
     power = capture["power"].to(d)
-    intensity = torch.where(power > 0, power, intensity)
+    intensity = torch.where(power > 0, torch.minimum(power, highlight_cap(unit[..., ::4, ::4])), intensity)
     linear = unit * intensity.reshape(-1, 1, 1, 1)
     p = surface_positions(d.shape[-2], d.shape[-1], d)
     r2 = (p[:, :2] ** 2).sum(1, keepdim=True) / (2 * cv.SURFACE_HALF_SIZE ** 2)

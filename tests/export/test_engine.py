@@ -14,6 +14,7 @@ import torch.nn.functional as F
 from export.engine import bank as bank_mod
 from export.engine import batches, flash, nets
 from export.engine.run import Run, RunConfig
+from export.render.brdf import render_maps
 from export.render import targets as render_targets
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.infer import flash_fields
@@ -188,6 +189,22 @@ def test_fast_highlight_removed_matches_the_reference(small_bank):
         assert float((r - f).abs().mean()) < 0.03
     # and it is not the photo: the flash image's highlight is gone
     assert float((fast[0] - cv.image_to_encoded(shot["linear"])).abs().mean()) > 0.005
+
+
+def test_a_fixed_power_photo_that_would_clip_is_exposed_down_and_one_that_would_not_keeps_its_power(small_bank):
+    bank = bank_mod.Bank(small_bank)
+    g = torch.Generator().manual_seed(5)
+    maps = batches.materials(bank, g, 4, 64)
+    cap = {k: v.float() for k, v in batches.simulate.sample_capture(g, 4).items()}
+    unit = render_maps(maps, light=cap["light"], camera=cap["camera"], intensity=1.0)
+    cap_at = batches.highlight_cap(unit[..., ::4, ::4])
+    clipped = ((unit[..., ::4, ::4] * cap_at.reshape(-1, 1, 1, 1)).amax(1) >= 1.0).float().mean((1, 2))
+    assert (clipped <= batches.MAX_CLIPPED_SHARE + 0.02).all()
+    for scale, capped in ((20.0, True), (0.05, False)):  # far above the cap; far below it
+        c = dict(cap, power=cap_at * scale)
+        shot = batches.photograph(maps, c, torch.Generator().manual_seed(1))
+        want = cap_at if capped else cap_at * scale
+        assert torch.allclose(shot["intensity"], want, rtol=1e-4), (scale, shot["intensity"], want)
 
 
 def test_flash_context_and_base_agree_with_numpy():
