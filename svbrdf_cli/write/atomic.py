@@ -202,14 +202,11 @@ def write_text(path, text):
 
 def clean_partials(out):
     """Remove the temporary folders that runs killed mid-write on this host left in ``out``: only
-    folders :func:`svbrdf_cli.write.ownership.stale_temporary` recognises (named and marked as ours, their
-    process dead), and empty ones named as ours."""
+    folders :func:`svbrdf_cli.write.ownership.orphan_temporary` recognises (named as ours, their process
+    dead, and marked as ours or killed before they were marked)."""
     if not os.path.isdir(out):
         return
     for name in os.listdir(out):
         path = os.path.join(out, name)
-        if ownership.stale_temporary(path):
+        if ownership.orphan_temporary(path):
             shutil.rmtree(path, ignore_errors=True)
-        elif ownership.empty_orphan(path):
-            with contextlib.suppress(OSError):
-                os.rmdir(path)

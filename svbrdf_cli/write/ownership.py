@@ -7,8 +7,9 @@
   its records (``texture_set.json``'s ``generator`` and ``files``, ``material.json``'s ``tool`` and
   ``files``), each file of it then counted as ours whatever its content.
 * A **temporary folder** (``.svbrdf-<pid>-<token>.partial``) holds :data:`TEMP_MARKER`, a record of
-  the tool, the pid, the host and the token (:func:`mark_temporary`); :func:`stale_temporary` says
-  whether a folder is one of ours whose process has died on this host.
+  the tool, the pid, the host and the token (:func:`mark_temporary`); :func:`orphan_temporary` says
+  whether a folder is one of ours whose process has died on this host: marked (:func:`stale_temporary`)
+  or killed before it was marked (:func:`unmarked_orphan`).
 * A **page** (the batch gallery, the viewer) carries :data:`GENERATOR_META` in its head
   (:func:`is_our_page`).
 
@@ -17,6 +18,7 @@ Paths in a manifest are relative, ``/``-separated and never leave the folder (:f
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
 import os
@@ -145,12 +147,18 @@ def unchanged(path, digest):
 # --------------------------------------------------------------------------
 
 def mark_temporary(folder):
-    """Write :data:`TEMP_MARKER` into a new temporary folder named by :data:`TEMP_NAME`."""
+    """Write :data:`TEMP_MARKER` into a new temporary folder named by :data:`TEMP_NAME`, in one
+    ``os.write`` to a file it creates: a run killed meanwhile leaves no marker or an empty one."""
     m = TEMP_NAME.match(os.path.basename(folder))
     record = {"tool": TOOL, "version": __version__, "pid": int(m.group(1)), "token": m.group(2),
               "host": socket.gethostname()}
-    with open(os.path.join(folder, TEMP_MARKER), "w", encoding="utf-8") as f:
-        json.dump(record, f)
+    data = json.dumps(record).encode("utf-8")
+    fd = os.open(os.path.join(folder, TEMP_MARKER), os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+    try:
+        if os.write(fd, data) != len(data):
+            raise OSError(errno.ENOSPC, "the temporary folder's marker was cut short")
+    finally:
+        os.close(fd)
 
 
 def _alive(pid):
@@ -178,15 +186,27 @@ def stale_temporary(path):
             and record.get("host") == socket.gethostname() and not _alive(pid))
 
 
-def empty_orphan(path):
-    """An empty folder named as ours (a run killed before it wrote the marker), its process dead."""
+def unmarked_orphan(path):
+    """Whether ``path`` is a temporary folder named as ours whose run was killed before it was marked:
+    a real folder, empty or holding only an empty :data:`TEMP_MARKER`, its process dead."""
     m = TEMP_NAME.match(os.path.basename(path))
     if m is None or os.path.islink(path) or not os.path.isdir(path):
         return False
+    marker = os.path.join(path, TEMP_MARKER)
     try:
-        return not os.listdir(path) and not _alive(int(m.group(1)))
+        names = os.listdir(path)
+        if names and (names != [TEMP_MARKER] or os.path.islink(marker) or not os.path.isfile(marker)
+                      or os.path.getsize(marker)):
+            return False
     except OSError:
         return False
+    return not _alive(int(m.group(1)))
+
+
+def orphan_temporary(path):
+    """Whether ``path`` is a temporary folder of ours left by a run that died on this host, marked
+    (:func:`stale_temporary`) or not (:func:`unmarked_orphan`)."""
+    return stale_temporary(path) or unmarked_orphan(path)
 
 
 # --------------------------------------------------------------------------

@@ -108,11 +108,26 @@ def test_only_marked_temporaries_of_dead_runs_are_removed(tmp_path):
         if record is not None:
             (d / ownership.TEMP_MARKER).write_text(json.dumps(record))
         fakes[d] = True
-    empty = out / f".svbrdf-{dead}-emptyabc.partial"  # killed before its marker: empty, removed
+    # killed before its marker was written: empty, or only an empty marker; removed
+    empty = out / f".svbrdf-{dead}-emptyabc.partial"
     empty.mkdir()
+    unmarked = out / f".svbrdf-{dead}-unmarked.partial"
+    unmarked.mkdir()
+    (unmarked / ownership.TEMP_MARKER).write_bytes(b"")
+    assert ownership.unmarked_orphan(empty) and ownership.unmarked_orphan(unmarked)
+    # an empty marker beside another file, a live run's empty folder: not judged ours, kept
+    beside = out / f".svbrdf-{dead}-besideab.partial"
+    beside.mkdir()
+    (beside / ownership.TEMP_MARKER).write_bytes(b"")
+    (beside / "thesis.pdf").write_bytes(b"%PDF")
+    live = out / f".svbrdf-{os.getpid()}-liveabcd.partial"
+    live.mkdir()
     atomic.clean_partials(out)
-    assert not (out / stale[0]).exists() and not empty.exists()
+    assert not (out / stale[0]).exists() and not empty.exists() and not unmarked.exists()
     assert all((d / "thesis.pdf").read_bytes() == b"%PDF" for d in fakes)
+    assert sorted(os.listdir(beside)) == sorted([ownership.TEMP_MARKER, "thesis.pdf"])
+    assert (beside / ownership.TEMP_MARKER).read_bytes() == b"" and (beside / "thesis.pdf").read_bytes() == b"%PDF"
+    assert live.is_dir()
 
 
 # --------------------------------------------------------------------------
@@ -304,15 +319,16 @@ def test_a_terminated_batch_leaves_no_temporary_folder(tmp_path):
 
 
 def test_a_killed_batchs_temporary_folder_goes_with_the_next_write_there(tmp_path):
-    """SIGKILL cannot be caught: the folder it leaves is recognisably ours (marker: pid, host, token), and
-    the next write of any set into that folder (capture, batch or export) removes it."""
+    """SIGKILL cannot be caught: the folder it leaves is recognisably ours (marker: pid, host, token; or,
+    killed before it was marked, empty or only an empty marker), and the next write of any set into that
+    folder (capture, batch or export) removes it."""
     proc, out, _ = _batch_until_writing(tmp_path)
     proc.send_signal(signal.SIGKILL)
     proc.wait()
     left = [n for n in os.listdir(out) if n.endswith(".partial")]
     if not left:
         pytest.skip("the set was renamed into place before the kill landed")
-    assert all(ownership.stale_temporary(out / n) for n in left)
+    assert all(ownership.orphan_temporary(out / n) for n in left)
     photo(tmp_path / "src.png")
     assert run("capture", tmp_path / "src.png", "-o", tmp_path / "sets", "--size", 256)[0] == 0
     code, text = run("export", tmp_path / "sets" / "src", "-o", out / "exported", "--preset", "gltf")
