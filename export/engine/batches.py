@@ -231,9 +231,9 @@ def estimated_flash(light, g):
     return torch.cat([light[:, :2] + xy, z], 1)
 
 
-def make(bank, g, batch, size=128, stage="maps", index=None):
+def make(bank, g, batch, size=128, stage="maps", index=None, specular_level="absolute"):
     """One batch for ``stage`` (see the module docstring); every tensor (B, C, size, size) float32
-    but ``intensity`` (B,).
+    but ``intensity`` (B,). ``specular_level``: the maps stage's F0 target (:func:`stored_targets`).
 
     Returns:
         dict: ``photo`` (3, encoded), ``context`` (4), ``base`` (10), the stage's targets
@@ -258,13 +258,24 @@ def make(bank, g, batch, size=128, stage="maps", index=None):
             out["I_hr"], out["I_hr2"] = highlight_removed_fast(maps, cam, intensity)
         if stage in ("maps", "joint"):
             level = flash.level_factor(intensity, light).reshape(-1, 1, 1, 1)
-            out.update(stored_targets(maps, level))
+            out.update(stored_targets(maps, level, specular_level))
     return out
 
 
-def stored_targets(maps, level):
-    """The maps stage's targets: the maps in their stored encoding, the diffuse times ``level`` (B, 1, 1, 1)."""
+#: What the maps stage's F0 target is: ``absolute`` (the material's), or ``photo`` (times the photo's
+#: flash level, as the diffuse: both then read the photo at the conventions' flash power, so their
+#: ratio, which relighting at a fitted intensity sees, is the photo's, and a metal's F0 is read from
+#: its highlight's brightness rather than guessed).
+SPECULAR_LEVELS = ("absolute", "photo")
+
+
+def stored_targets(maps, level, specular_level="absolute"):
+    """The maps stage's targets: the maps in their stored encoding, the diffuse (and with
+    ``specular_level`` "photo" the F0) times ``level`` (B, 1, 1, 1)."""
+    if specular_level not in SPECULAR_LEVELS:
+        raise ValueError(f"specular_level {specular_level!r}: one of {', '.join(SPECULAR_LEVELS)}")
+    spec = (maps["specular"] * level).clamp(0, 1) if specular_level == "photo" else maps["specular"]
     return {"normal": cv.encode_normals(maps["normal"]),
             "diffuse": cv.albedo_to_stored((maps["diffuse"] * level).clamp(0, 1)),
             "roughness": maps["roughness"].clamp(0, 1),
-            "specular": cv.albedo_to_stored(maps["specular"])}
+            "specular": cv.albedo_to_stored(spec)}

@@ -70,8 +70,11 @@ def _setup(threads):
 @click.option("--weight", "weight_pairs", multiple=True, metavar="NAME=VALUE", callback=lambda ctx, p, v: _weights(v),
               help="A maps-loss weight from now on (normal, diffuse, roughness, specular, relief, render; 0 drops "
                    "the term), e.g. render=0.5; repeatable. The run keeps it.")
+@click.option("--specular-level", type=click.Choice(["absolute", "photo"]), default=None,
+              help="The maps stage's F0 target from now on: the material's, or at the photo's flash level as "
+                   "the diffuse (the run keeps it).")
 def train(folder, threads, steps, minutes, checkpoint_minutes, eval_minutes, checkpoint, schedule, restart_stage,
-          bank_count, weight_pairs):
+          bank_count, weight_pairs, specular_level):
     """Train the swift chain in FOLDER, or resume it; SIGTERM/SIGINT save and exit 0."""
     import dataclasses
 
@@ -84,6 +87,9 @@ def train(folder, threads, steps, minutes, checkpoint_minutes, eval_minutes, che
                                  ("bank_count", bank_count)) if v is not None}
     if weight_pairs:
         changes["weights"] = tuple({**dict(run.config.weights), **weight_pairs}.items())
+    if specular_level and specular_level != run.config.specular_level:
+        changes["specular_level"] = specular_level
+        click.echo(f"the maps stage's F0 target from step {run.step}: {specular_level}", err=True)
     if changes:
         run.config = dataclasses.replace(run.config, **changes)
         run.net.loss_weights = dict(run.config.weights)
@@ -139,7 +145,11 @@ def _schedule(text):
 @click.option("--bank-count", type=int, default=None, help="Passed to train: the bank's size from now on.")
 @click.option("--weight", "weight_pairs", multiple=True, metavar="NAME=VALUE", callback=lambda ctx, p, v: (_weights(v), v)[1],
               help="Passed to train: a maps-loss weight from now on, e.g. render=0.5; repeatable.")
-def background(folder, schedule, restart_stage, bank_count, weight_pairs):
+@click.option("--specular-level", type=click.Choice(["absolute", "photo"]), default=None,
+              help="Passed to train: the maps stage's F0 target from now on.")
+@click.option("--checkpoint", default=None,
+              help=f"Passed to train: the compact checkpoint a run folder without a state starts from (default {CHECKPOINT}).")
+def background(folder, schedule, restart_stage, bank_count, weight_pairs, specular_level, checkpoint):
     """Resume (or start) the run in FOLDER detached, on one core; its log is FOLDER/log.txt."""
     import os
     import subprocess
@@ -160,6 +170,7 @@ def background(folder, schedule, restart_stage, bank_count, weight_pairs):
         args += (["--schedule", schedule] if schedule else []) + (["--restart-stage", restart_stage] if restart_stage else [])
         args += ["--bank-count", str(bank_count)] if bank_count else []
         args += [a for pair in weight_pairs for a in ("--weight", pair)]
+        args += (["--specular-level", specular_level] if specular_level else []) + (["--checkpoint", checkpoint] if checkpoint else [])
         p = subprocess.Popen(args,
                              stdout=log, stderr=log, stdin=subprocess.DEVNULL, start_new_session=True, env=env)
     with open(pid_file, "w") as f:
@@ -255,8 +266,9 @@ def onnx(folder, out):
     last = json.loads(open(curve).read().splitlines()[-1]) if os.path.isfile(curve) else {}
     provenance = {"run": folder, "step": run.step, "samples": run.samples, "cpu_hours": round(run.cpu / 3600, 3),
                   "stage": run.stage, "schedule": run.config.schedule, "bank": "export.engine.bank (procedural, CC0, mixes)",
-                  "des19": last.get("des19")}
+                  "des19": last.get("des19"), "specular_level": run.config.specular_level}
     provenance["weights"] = "moving average" if run.ema is not None else "as trained"
     with run.averaged():
-        path = engine_onnx.export(run.net, os.path.join(out, "chain.onnx"), provenance, run_size=run.config.size)
+        path = engine_onnx.export(run.net, os.path.join(out, "chain.onnx"), provenance, run_size=run.config.size,
+                                 specular_level=run.config.specular_level)
     click.echo(f"{path}: {os.path.getsize(path) / 1e6:.1f} MB, {run.samples} samples")

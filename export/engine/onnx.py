@@ -39,9 +39,11 @@ class _Graph(nn.Module):
         return masks, aux.clamp(0.0, 1.0), torch.cat([maps[k] for k in cv.MAP_NAMES], 1)
 
 
-def export(net, path, provenance=None, size=128, run_size=None):
+def export(net, path, provenance=None, size=128, run_size=None, specular_level="absolute"):
     """Write ``net`` (eval mode, fp32) to ``path`` as ONNX; ``run_size``: the training's image size,
-    recorded for the runtime (None: the runtime runs it at the size it is given)."""
+    recorded for the runtime (None: the runtime runs it at the size it is given); ``specular_level``:
+    the F0 the maps stage was trained on (:data:`export.engine.batches.SPECULAR_LEVELS`), recorded when
+    it is at the photo's level, so that the runtime scales it as the diffuse."""
     net = net.eval().float()
     x = (torch.rand(1, 3, size, size), torch.zeros(1, 4, size, size), torch.rand(1, 10, size, size))
     dyn = {k: {2: "height", 3: "width"} for k in INPUTS + OUTPUTS}
@@ -55,6 +57,8 @@ def export(net, path, provenance=None, size=128, run_size=None):
             "provenance": json.dumps(provenance or {})}
     if run_size:
         meta["run_size"] = str(int(run_size))
+    if specular_level != "absolute":
+        meta["specular_level"] = specular_level
     for key, value in meta.items():
         entry = model.metadata_props.add()
         entry.key, entry.value = key, value

@@ -75,6 +75,10 @@ class RunConfig:
     #: Decay per step of the moving average of the training stage's weights (:meth:`Run.averaged`),
     #: the weights evaluated and exported; 0: none.
     ema_decay: float = 0.9995
+    #: The maps stage's F0 target (:data:`export.engine.batches.SPECULAR_LEVELS`): the material's, or at
+    #: the photo's flash level as the diffuse (an export records it; the runtime then scales F0 as it
+    #: scales the diffuse).
+    specular_level: str = "absolute"
 
 
 def _config_from(d):
@@ -355,7 +359,7 @@ class Run:
         if real:
             loss = c.real_weight * real_loss(self.net, self.real.batch(self.g, c.batch, c.size))
         else:
-            b = batches.make(bank, self.g, c.batch, c.size, self.stage)
+            b = batches.make(bank, self.g, c.batch, c.size, self.stage, specular_level=c.specular_level)
             if self.stage == "maps" and dict(c.weights).get("render"):
                 b["lights"], b["cameras"] = render_views(self.g, c.batch)
             loss = stage_loss(self.net, self.stage, b)
@@ -463,7 +467,8 @@ class Run:
     def _val_batches(self, stage):
         g = torch.Generator().manual_seed(12345)
         n = self.config.val_samples
-        return [batches.make(self.load_bank(), g, 16, self.config.size, stage) for _ in range(max(1, n // 16))]
+        return [batches.make(self.load_bank(), g, 16, self.config.size, stage,
+                             specular_level=self.config.specular_level) for _ in range(max(1, n // 16))]
 
     @torch.no_grad()
     def validate(self, stage):

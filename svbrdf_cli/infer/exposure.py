@@ -56,7 +56,11 @@ def photo_level(gain_ev, manual=False):
     return float(1.0 if manual else 2.0 ** -gain_ev)
 
 
-def to_photo_level(stored, scale):
-    """``stored`` maps with the diffuse (stored encoding) scaled by ``scale`` in linear units, clipped to 1."""
-    lin = cv.albedo_to_linear(np.asarray(stored["diffuse"], np.float32)) * np.float32(scale)
-    return dict(stored, diffuse=cv.albedo_to_stored(np.clip(lin, 0.0, 1.0)).astype(np.float32))
+def to_photo_level(stored, scale, specular=False):
+    """``stored`` maps with the diffuse (and with ``specular`` the F0, for a model that reads it at the
+    photo's level) in the stored encoding scaled by ``scale`` in linear units, clipped to 1."""
+    out = dict(stored)
+    for k in ("diffuse", "specular") if specular else ("diffuse",):
+        lin = cv.albedo_to_linear(np.asarray(stored[k], np.float32)) * np.float32(scale)
+        out[k] = cv.albedo_to_stored(np.clip(lin, 0.0, 1.0)).astype(np.float32)
+    return out

@@ -232,6 +232,9 @@ class SwiftModel:
         self.run_size = int(meta["run_size"]) if meta.get("run_size") else None
         self.provenance = json.loads(meta.get("provenance", "{}"))
         self.tier = meta.get("tier", "swift")
+        #: "photo": the chain reads F0 at the photo's flash level, as the diffuse (the capture scales both
+        #: to the photo as shot); "absolute": the material's F0, kept as it is.
+        self.specular_level = meta.get("specular_level", "absolute")
         self.timings = {}
         self.found = self.fit = None
         self.passes = PASSES

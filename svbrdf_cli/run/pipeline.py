@@ -246,7 +246,7 @@ def infer_set(prepared, chain, out_root, opts, model_name="physical", progress=N
     plausible.check_maps(p.path, net_in, stored, chain.describe().get("found"))
     # the albedo of the photo as shot (docs/conventions.md, "The albedo level")
     level = photo_level(p.gain_ev, manual=opts.exposure is not None)
-    stored = to_photo_level(stored, level)
+    stored = to_photo_level(stored, level, specular=getattr(chain.used, "specular_level", "absolute") == "photo")
     maps = None  # linear maps, made only where needed (the native preset writes the stored ones)
     tiling = None
     if opts.tileable:

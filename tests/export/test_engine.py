@@ -661,3 +661,63 @@ def test_the_run_scores_its_chain_on_generated_captures_under_known_lights():
     assert set(got) == {"known_lights", "known_lights_refined"}
     truth = np.mean([known_lights.score(c["truth"], c) for c in caps])
     assert 0 < truth < 0.5 * got["known_lights"] < 1 and 0 < got["known_lights_refined"] < 1
+
+
+def test_the_f0_target_at_the_photos_level_scales_as_the_diffuse():
+    g = torch.Generator().manual_seed(6)
+    maps = {"normal": F.normalize(torch.rand(2, 3, 8, 8, generator=g) + torch.tensor([0, 0, 2.0]).reshape(1, 3, 1, 1), dim=1),
+            "diffuse": 0.5 * torch.rand(2, 3, 8, 8, generator=g), "roughness": torch.rand(2, 1, 8, 8, generator=g),
+            "specular": torch.full((2, 3, 8, 8), 0.04)}
+    level = torch.tensor([0.5, 2.0]).reshape(-1, 1, 1, 1)
+    plain = cv.decode_maps(batches.stored_targets(maps, level), axis=1)
+    scaled = cv.decode_maps(batches.stored_targets(maps, level, "photo"), axis=1)
+    assert torch.allclose(plain["specular"], maps["specular"], atol=1e-5)  # the material's F0
+    assert torch.allclose(scaled["specular"], maps["specular"] * level, atol=1e-5)  # read as the diffuse is
+    assert torch.allclose(scaled["diffuse"], plain["diffuse"]) and torch.allclose(scaled["diffuse"], maps["diffuse"] * level, atol=1e-5)
+    with pytest.raises(ValueError):
+        batches.stored_targets(maps, level, "relative")
+
+
+def test_an_export_trained_on_f0_at_the_photos_level_has_its_f0_scaled_as_the_diffuse(tmp_path):
+    """The export records the F0 target; ``svbrdf capture`` then brings F0 to the photo as shot with the
+    diffuse (both twice as bright from a photo one stop brighter), and keeps an absolute model's F0."""
+    pytest.importorskip("onnxruntime")
+    import json
+
+    from click.testing import CliRunner
+
+    from export.engine import onnx as engine_onnx
+    from svbrdf_cli.cli.main import cli
+    from svbrdf_cli.imageio import read_image
+    from svbrdf_cli.infer.registry import load_model
+
+    net = _speaking_net()
+    specs = {}
+    for level in ("absolute", "photo"):
+        folder = tmp_path / level
+        engine_onnx.export(net, str(folder / "chain.onnx"), provenance={}, run_size=64, specular_level=level)
+        assert load_model(str(folder)).specular_level == level
+        for stops in ("0", "1"):
+            out = tmp_path / f"out-{level}-{stops}"
+            res = CliRunner().invoke(cli, ["capture", os.path.join(ROOT, "examples", "glazed_tiles.jpg"), "-o", str(out),
+                                           "--model", str(folder), "--size", "256", "--no-preview", "--refine", "0",
+                                           "--exposure", stops])
+            assert res.exit_code == 0, res.output
+            specs[level, stops] = cv.albedo_to_linear(read_image(str(out / "glazed_tiles" / "specular.png")))
+            assert json.loads((out / "glazed_tiles" / "material.json").read_text())["albedo_level"]["scale"] == 1.0
+    # --exposure STOPS reads the photo as exposed: the network sees a brighter photo at 1 stop
+    for stops in ("0", "1"):
+        assert np.abs(specs["absolute", stops] - specs["photo", stops]).max() < 2e-2  # the same network, scale 1
+    res = {}
+    for level in ("absolute", "photo"):
+        folder = tmp_path / level
+        out = tmp_path / f"auto-{level}"
+        r = CliRunner().invoke(cli, ["capture", os.path.join(ROOT, "examples", "glazed_tiles.jpg"), "-o", str(out),
+                                     "--model", str(folder), "--size", "256", "--no-preview", "--refine", "0"])
+        assert r.exit_code == 0, r.output
+        rec = json.loads((out / "glazed_tiles" / "material.json").read_text())
+        res[level] = (cv.albedo_to_linear(read_image(str(out / "glazed_tiles" / "specular.png"))), rec["albedo_level"]["scale"])
+    (absolute, scale), (photo, _) = res["absolute"], res["photo"]
+    assert abs(scale - 1.0) > 0.2  # the sample is exposed by the tool, so the scaling shows
+    ok = (photo > 0.005) & (photo < 0.99)
+    assert np.abs(np.median(photo[ok] / np.maximum(absolute[ok], 1e-6)) - scale) < 0.05 * scale
