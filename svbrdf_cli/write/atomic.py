@@ -123,8 +123,11 @@ def write_set(folder, write_files, force, extra=None, protect=()):
             if os.path.lexists(folder):
                 _merge(tmp, folder)
             else:
-                os.remove(os.path.join(tmp, ownership.TEMP_MARKER))
+                # renamed with its marker, which goes after: a kill between the two leaves a finished set
+                # with a stray marker, never an unmarked temporary the next write cannot tell for ours
                 os.rename(tmp, folder)
+                with contextlib.suppress(FileNotFoundError):
+                    os.remove(os.path.join(folder, ownership.TEMP_MARKER))
     except OSError as e:
         raise ImageWriteError(f"Could not write the texture set '{folder}': {e.strerror or e}. "
                               "Check the path and free space.") from None
