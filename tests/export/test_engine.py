@@ -665,7 +665,8 @@ def test_the_run_scores_its_chain_on_generated_captures_under_known_lights():
 
 def test_the_f0_target_at_the_photos_level_scales_as_the_diffuse():
     g = torch.Generator().manual_seed(6)
-    maps = {"normal": F.normalize(torch.rand(2, 3, 8, 8, generator=g) + torch.tensor([0, 0, 2.0]).reshape(1, 3, 1, 1), dim=1),
+    up = torch.tensor([0, 0, 2.0]).reshape(1, 3, 1, 1)
+    maps = {"normal": F.normalize(torch.rand(2, 3, 8, 8, generator=g) + up, dim=1),
             "diffuse": 0.5 * torch.rand(2, 3, 8, 8, generator=g), "roughness": torch.rand(2, 1, 8, 8, generator=g),
             "specular": torch.full((2, 3, 8, 8), 0.04)}
     level = torch.tensor([0.5, 2.0]).reshape(-1, 1, 1, 1)
@@ -673,7 +674,8 @@ def test_the_f0_target_at_the_photos_level_scales_as_the_diffuse():
     scaled = cv.decode_maps(batches.stored_targets(maps, level, "photo"), axis=1)
     assert torch.allclose(plain["specular"], maps["specular"], atol=1e-5)  # the material's F0
     assert torch.allclose(scaled["specular"], maps["specular"] * level, atol=1e-5)  # read as the diffuse is
-    assert torch.allclose(scaled["diffuse"], plain["diffuse"]) and torch.allclose(scaled["diffuse"], maps["diffuse"] * level, atol=1e-5)
+    assert torch.allclose(scaled["diffuse"], plain["diffuse"])
+    assert torch.allclose(scaled["diffuse"], maps["diffuse"] * level, atol=1e-5)
     with pytest.raises(ValueError):
         batches.stored_targets(maps, level, "relative")
 
