@@ -723,3 +723,18 @@ def test_an_export_trained_on_f0_at_the_photos_level_has_its_f0_scaled_as_the_di
     assert abs(scale - 1.0) > 0.2  # the sample is exposed by the tool, so the scaling shows
     ok = (photo > 0.005) & (photo < 0.99)
     assert np.abs(np.median(photo[ok] / np.maximum(absolute[ok], 1e-6)) - scale) < 0.05 * scale
+
+
+def test_bf16_autocast_only_where_the_cpu_has_it(tmp_path, monkeypatch):
+    from export.engine import run as run_mod
+
+    monkeypatch.delenv("SVBRDF_AUTOCAST", raising=False)
+    avx2, bf16 = tmp_path / "avx2", tmp_path / "bf16"
+    avx2.write_text("processor\t: 0\nflags\t\t: fpu sse avx2 fma\n")
+    bf16.write_text("processor\t: 0\nflags\t\t: fpu avx2 avx512f avx512_bf16\n")
+    assert not run_mod.native_bf16(str(avx2)) and run_mod.native_bf16(str(bf16))
+    assert not run_mod.native_bf16(str(tmp_path / "missing"))
+    monkeypatch.setenv("SVBRDF_AUTOCAST", "bf16")
+    assert run_mod.native_bf16(str(avx2))
+    monkeypatch.setenv("SVBRDF_AUTOCAST", "fp32")
+    assert not run_mod.native_bf16(str(bf16))
