@@ -114,7 +114,8 @@ def tint(maps, g, hue=0.05, saturation=(0.8, 1.5), brightness=0.3):
     return out
 
 
-#: The most of a photo lit at a fixed flash power that may clip (any channel at white): a brighter one is
+#: The most of a photo lit at a fixed flash power that may clip (any channel of its linear render at
+#: white, before white balance, noise and the tone curve): a brighter one is
 #: exposed down to it, as a phone's exposure would. Uncapped, that half of the photos clipped up to 92 %
 #: of their pixels (p90 0.41 on fresh procedural materials); Des19's inputs clip at most 12.6 %, the
 #: real flash photos 1.2 % at p90.
@@ -129,15 +130,18 @@ def highlight_cap(unit):
     return 1.0 / q.clamp_min(1e-8)
 
 
-def photograph(maps, capture, g):
+def photograph(maps, capture, g, cap=True):
     """The simulated photo of a batch (:func:`export.data.simulate.photograph`'s camera model, with
-    one render and auto exposure on a subsample): ``photo``, the clean ``linear`` flash image, ``intensity`` (B,)."""
+    one render and auto exposure on a subsample; unlike it, with ``cap`` a fixed power is lowered to
+    :func:`highlight_cap`): ``photo``, the clean ``linear`` flash image, ``intensity`` (B,)."""
     d = maps["diffuse"]
     cam, light = capture["camera"].to(d), capture["light"].to(d)
     unit = render_maps(maps, light=light, camera=cam, intensity=1.0)
     intensity = render_targets.exposure_of(unit[..., ::4, ::4], capture["exposure"].to(d), iterations=20)
     power = capture["power"].to(d)
-    intensity = torch.where(power > 0, torch.minimum(power, highlight_cap(unit[..., ::4, ::4])), intensity)
+    if cap:
+        power = torch.where(power > 0, torch.minimum(power, highlight_cap(unit[..., ::4, ::4])), power)
+    intensity = torch.where(power > 0, power, intensity)
     linear = unit * intensity.reshape(-1, 1, 1, 1)
     p = surface_positions(d.shape[-2], d.shape[-1], d)
     r2 = (p[:, :2] ** 2).sum(1, keepdim=True) / (2 * cv.SURFACE_HALF_SIZE ** 2)

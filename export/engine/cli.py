@@ -57,8 +57,9 @@ def _setup(threads):
 @click.option("--minutes", type=float, default=None, help="Stop after this many minutes.")
 @click.option("--checkpoint-minutes", type=float, default=None, help="Save every this many minutes (default 10).")
 @click.option("--eval-minutes", type=float, default=None, help="Evaluate every this many minutes (default 30).")
-@click.option("--checkpoint", default=CHECKPOINT, show_default=True,
-              help="Committed compact checkpoint to resume from when FOLDER holds no state.")
+@click.option("--checkpoint", default=None,
+              help=f"Committed compact checkpoint to resume from when FOLDER holds no state (default {CHECKPOINT}; "
+                   "one named here must exist).")
 @click.option("--schedule", default=None, callback=lambda ctx, p, v: _schedule(v),
               help="Samples per stage, e.g. masks=300000,aux=200000,maps=3000000 (default: the run's own).")
 @click.option("--restart-stage", type=click.Choice(["masks", "aux", "maps"]), default=None,
@@ -77,10 +78,15 @@ def train(folder, threads, steps, minutes, checkpoint_minutes, eval_minutes, che
           bank_count, weight_pairs, specular_level):
     """Train the swift chain in FOLDER, or resume it; SIGTERM/SIGINT save and exit 0."""
     import dataclasses
+    import os
 
     from export.engine.run import Run, RunConfig
 
     _setup(threads)
+    if checkpoint is None:
+        checkpoint = CHECKPOINT
+    elif not os.path.isfile(os.path.join(folder, "state.pt")) and not os.path.isfile(os.path.join(checkpoint, "manifest.json")):
+        raise click.ClickException(f"{checkpoint}: no compact checkpoint there (manifest.json) to start {folder} from")
     config = dataclasses.replace(RunConfig(), schedule=schedule) if schedule else None
     run = Run(folder, config=config, log=lambda m: click.echo(m, err=True), checkpoint=checkpoint)
     changes = {k: v for k, v in (("checkpoint_minutes", checkpoint_minutes), ("eval_minutes", eval_minutes),
@@ -170,7 +176,8 @@ def background(folder, schedule, restart_stage, bank_count, weight_pairs, specul
         args += (["--schedule", schedule] if schedule else []) + (["--restart-stage", restart_stage] if restart_stage else [])
         args += ["--bank-count", str(bank_count)] if bank_count else []
         args += [a for pair in weight_pairs for a in ("--weight", pair)]
-        args += (["--specular-level", specular_level] if specular_level else []) + (["--checkpoint", checkpoint] if checkpoint else [])
+        args += ["--specular-level", specular_level] if specular_level else []
+        args += ["--checkpoint", checkpoint] if checkpoint else []
         p = subprocess.Popen(args,
                              stdout=log, stderr=log, stdin=subprocess.DEVNULL, start_new_session=True, env=env)
     with open(pid_file, "w") as f:

@@ -78,9 +78,11 @@ def generate(index, seed=SEED, size=SIZE, ranges=simulate.DEFAULT_RANGES):
         maps = material(g, size)
         capture = {k: v.float() for k, v in simulate.sample_capture(g, 1, ranges).items()}
         lights = torch.cat([capture["light"].double(), ring(g, capture["camera"][0].double())])
-        first = batches.photograph(maps, capture, g)
+        # uncapped (batches.highlight_cap): the captures stay those of earlier runs' curves, and every photo
+        # keeps photo 0's exposure
+        first = batches.photograph(maps, capture, g, cap=False)
         fixed = dict(capture, power=first["intensity"].float().reshape(1))  # the same exposure for every photo
-        photos = [first["photo"]] + [batches.photograph(maps, dict(fixed, light=light[None].float()), g)["photo"]
+        photos = [first["photo"]] + [batches.photograph(maps, dict(fixed, light=light[None].float()), g, cap=False)["photo"]
                                      for light in lights[1:]]
     photos = torch.cat(photos).permute(0, 2, 3, 1).numpy()
     truth = cv.encode_maps({k: v[0].permute(1, 2, 0).numpy() for k, v in maps.items()})

@@ -84,7 +84,8 @@ class RunConfig:
 
 
 def _config_from(d):
-    d = dict(d)
+    known = {f.name for f in dataclasses.fields(RunConfig)}
+    d = {k: v for k, v in d.items() if k in known}  # (a setting a later version added is left out)
     d["schedule"] = tuple(tuple(x) for x in d["schedule"])
     d["weights"] = tuple(tuple(x) for x in d["weights"])
     return RunConfig(**d)
@@ -524,7 +525,7 @@ class Run:
         with self.averaged():
             entry = {"samples": self.samples, "cpu_hours": round(self.cpu / 3600, 4), "step": self.step,
                      "stage": stage, "train_loss": train_loss, "val_loss": self.validate(stage), "time": time.time(),
-                     "ema": self.ema is not None}
+                     "ema": self.ema is not None, "specular_level": self.config.specular_level}
             if des19:
                 entry["des19"] = score_des19(self.net, des19, self.config.size)
                 entry["des19_size"] = self.config.size

@@ -246,7 +246,8 @@ def infer_set(prepared, chain, out_root, opts, model_name="physical", progress=N
     plausible.check_maps(p.path, net_in, stored, chain.describe().get("found"))
     # the albedo of the photo as shot (docs/conventions.md, "The albedo level")
     level = photo_level(p.gain_ev, manual=opts.exposure is not None)
-    stored = to_photo_level(stored, level, specular=getattr(chain.used, "specular_level", "absolute") == "photo")
+    specular_scaled = getattr(chain.used, "specular_level", "absolute") == "photo"
+    stored = to_photo_level(stored, level, specular=specular_scaled)
     maps = None  # linear maps, made only where needed (the native preset writes the stored ones)
     tiling = None
     if opts.tileable:
@@ -276,8 +277,10 @@ def infer_set(prepared, chain, out_root, opts, model_name="physical", progress=N
         "exposure": {"mode": "auto" if opts.exposure is None else "manual", "stops": round(p.gain_ev, 3)},
         "albedo_level": {"scale": round(level, 6),
                          "convention": "the photo " + ("as shot" if opts.exposure is None else "at --exposure") +
-                                       ", de-lit and read at the Des19 flash power: a white surface under the "
-                                       f"flash photographs at {WHITE_UNDER_FLASH:.3f} (docs/conventions.md)"},
+                                       ", the highlight and the flash's fall-off taken off, read at the Des19 "
+                                       f"flash power: a white surface under the flash photographs at "
+                                       f"{WHITE_UNDER_FLASH:.3f} (docs/conventions.md)",
+                         "specular_scaled": specular_scaled},
         "white_balance": list(opts.white_balance) if opts.white_balance else None,
         "network_size": NETWORK_SIZE, "size": side,
         "upsampling": upsampling,

@@ -85,7 +85,14 @@ def make_temporary(parent):
     """A new temporary folder in ``parent``, named and marked as ours (:mod:`svbrdf_cli.write.ownership`)."""
     # a plain name (the set's own may not be valid UTF-8, which image libraries cannot open)
     tmp = tempfile.mkdtemp(prefix=f".svbrdf-{os.getpid()}-", suffix=".partial", dir=parent)
-    ownership.mark_temporary(tmp)
+    try:
+        ownership.mark_temporary(tmp)
+    except OSError:  # (a full disk): our folder and its half marker go, not left unrecognisable
+        with contextlib.suppress(OSError):
+            with contextlib.suppress(FileNotFoundError):
+                os.remove(os.path.join(tmp, ownership.TEMP_MARKER))
+            os.rmdir(tmp)
+        raise
     return tmp
 
 
@@ -126,7 +133,7 @@ def write_set(folder, write_files, force, extra=None, protect=()):
                 # renamed with its marker, which goes after: a kill between the two leaves a finished set
                 # with a stray marker, never an unmarked temporary the next write cannot tell for ours
                 os.rename(tmp, folder)
-                with contextlib.suppress(FileNotFoundError):
+                with contextlib.suppress(OSError):  # the set is written whatever happens to the marker
                     os.remove(os.path.join(folder, ownership.TEMP_MARKER))
     except OSError as e:
         raise ImageWriteError(f"Could not write the texture set '{folder}': {e.strerror or e}. "
@@ -211,5 +218,11 @@ def clean_partials(out):
         return
     for name in os.listdir(out):
         path = os.path.join(out, name)
-        if ownership.orphan_temporary(path):
+        if ownership.stale_temporary(path):
             shutil.rmtree(path, ignore_errors=True)
+        elif ownership.unmarked_orphan(path):
+            # nothing in it but an empty marker: rmdir, which fails if anything came in since the check
+            with contextlib.suppress(OSError):
+                with contextlib.suppress(FileNotFoundError):
+                    os.remove(os.path.join(path, ownership.TEMP_MARKER))
+                os.rmdir(path)

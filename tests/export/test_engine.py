@@ -690,6 +690,7 @@ def test_an_export_trained_on_f0_at_the_photos_level_has_its_f0_scaled_as_the_di
 
     from export.engine import onnx as engine_onnx
     from svbrdf_cli.cli.main import cli
+    from svbrdf_cli.infer.chain import ModelError
     from svbrdf_cli.imageio import read_image
     from svbrdf_cli.infer.registry import load_model
 
@@ -718,7 +719,11 @@ def test_an_export_trained_on_f0_at_the_photos_level_has_its_f0_scaled_as_the_di
                                      "--model", str(folder), "--size", "256", "--no-preview", "--refine", "0"])
         assert r.exit_code == 0, r.output
         rec = json.loads((out / "glazed_tiles" / "material.json").read_text())
+        assert rec["model"]["specular_level"] == level and rec["albedo_level"]["specular_scaled"] == (level == "photo")
         res[level] = (cv.albedo_to_linear(read_image(str(out / "glazed_tiles" / "specular.png"))), rec["albedo_level"]["scale"])
+    engine_onnx.export(net, str(tmp_path / "odd" / "chain.onnx"), provenance={}, specular_level="relative")
+    with pytest.raises(ModelError, match="relative"):
+        load_model(str(tmp_path / "odd"))
     (absolute, scale), (photo, _) = res["absolute"], res["photo"]
     assert abs(scale - 1.0) > 0.2  # the sample is exposed by the tool, so the scaling shows
     ok = (photo > 0.005) & (photo < 0.99)
