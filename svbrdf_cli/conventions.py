@@ -62,6 +62,11 @@ IMAGE_GAMMA = 2.2
 #: specular to metallic workflows).
 DIELECTRIC_F0 = 0.04
 
+#: What a trained chain's F0 is (``specular_level`` in an export's metadata): ``absolute``, the
+#: material's; or ``photo``, read at the photo's flash level as the diffuse, so that the capture scales
+#: it with the diffuse (``docs/training.md``, "F0 at the photo's level").
+SPECULAR_LEVELS = ("absolute", "photo")
+
 #: F0 (brightness) up to this is a dielectric's, whatever its tint: water 0.02, plastics, lacquer,
 #: glass and stone 0.04-0.05, gemstones up to about 0.08. Metals reflect 0.5 and more (iron 0.56,
 #: gold, copper, aluminium 0.9). From DIELECTRIC_MAX_F0 to METAL_MIN_F0 a material is read as

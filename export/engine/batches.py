@@ -137,10 +137,11 @@ def photograph(maps, capture, g, cap=True):
     d = maps["diffuse"]
     cam, light = capture["camera"].to(d), capture["light"].to(d)
     unit = render_maps(maps, light=light, camera=cam, intensity=1.0)
-    intensity = render_targets.exposure_of(unit[..., ::4, ::4], capture["exposure"].to(d), iterations=20)
+    sub = unit[..., ::4, ::4]
+    intensity = render_targets.exposure_of(sub, capture["exposure"].to(d), iterations=20)
     power = capture["power"].to(d)
     if cap:
-        power = torch.where(power > 0, torch.minimum(power, highlight_cap(unit[..., ::4, ::4])), power)
+        power = torch.where(power > 0, torch.minimum(power, highlight_cap(sub)), power)
     intensity = torch.where(power > 0, power, intensity)
     linear = unit * intensity.reshape(-1, 1, 1, 1)
     p = surface_positions(d.shape[-2], d.shape[-1], d)
@@ -266,18 +267,13 @@ def make(bank, g, batch, size=128, stage="maps", index=None, specular_level="abs
     return out
 
 
-#: What the maps stage's F0 target is: ``absolute`` (the material's), or ``photo`` (times the photo's
-#: flash level, as the diffuse: both then read the photo at the conventions' flash power, so their
-#: ratio, which relighting at a fitted intensity sees, is the photo's, and a metal's F0 is read from
-#: its highlight's brightness rather than guessed).
-SPECULAR_LEVELS = ("absolute", "photo")
-
-
 def stored_targets(maps, level, specular_level="absolute"):
     """The maps stage's targets: the maps in their stored encoding, the diffuse (and with
-    ``specular_level`` "photo" the F0) times ``level`` (B, 1, 1, 1)."""
-    if specular_level not in SPECULAR_LEVELS:
-        raise ValueError(f"specular_level {specular_level!r}: one of {', '.join(SPECULAR_LEVELS)}")
+    ``specular_level`` "photo" the F0, :data:`svbrdf_cli.conventions.SPECULAR_LEVELS`: both then read the
+    photo at the conventions' flash power, their ratio the photo's, a metal's F0 read from its
+    highlight's brightness rather than guessed) times ``level`` (B, 1, 1, 1)."""
+    if specular_level not in cv.SPECULAR_LEVELS:
+        raise ValueError(f"specular_level {specular_level!r}: one of {', '.join(cv.SPECULAR_LEVELS)}")
     spec = (maps["specular"] * level).clamp(0, 1) if specular_level == "photo" else maps["specular"]
     return {"normal": cv.encode_normals(maps["normal"]),
             "diffuse": cv.albedo_to_stored((maps["diffuse"] * level).clamp(0, 1)),

@@ -16,6 +16,7 @@ import click
 
 from export.engine import bank as bank_mod
 from export.engine import keep_memory
+from svbrdf_cli.conventions import SPECULAR_LEVELS
 
 #: The committed compact checkpoint of the current run (export.engine.run.write_compact).
 CHECKPOINT = "weights/checkpoints/swift-run"
@@ -71,7 +72,7 @@ def _setup(threads):
 @click.option("--weight", "weight_pairs", multiple=True, metavar="NAME=VALUE", callback=lambda ctx, p, v: _weights(v),
               help="A maps-loss weight from now on (normal, diffuse, roughness, specular, relief, render; 0 drops "
                    "the term), e.g. render=0.5; repeatable. The run keeps it.")
-@click.option("--specular-level", type=click.Choice(["absolute", "photo"]), default=None,
+@click.option("--specular-level", type=click.Choice(SPECULAR_LEVELS), default=None,
               help="The maps stage's F0 target from now on: the material's, or at the photo's flash level as "
                    "the diffuse (the run keeps it).")
 def train(folder, threads, steps, minutes, checkpoint_minutes, eval_minutes, checkpoint, schedule, restart_stage,
@@ -151,7 +152,7 @@ def _schedule(text):
 @click.option("--bank-count", type=int, default=None, help="Passed to train: the bank's size from now on.")
 @click.option("--weight", "weight_pairs", multiple=True, metavar="NAME=VALUE", callback=lambda ctx, p, v: (_weights(v), v)[1],
               help="Passed to train: a maps-loss weight from now on, e.g. render=0.5; repeatable.")
-@click.option("--specular-level", type=click.Choice(["absolute", "photo"]), default=None,
+@click.option("--specular-level", type=click.Choice(SPECULAR_LEVELS), default=None,
               help="Passed to train: the maps stage's F0 target from now on.")
 @click.option("--checkpoint", default=None,
               help=f"Passed to train: the compact checkpoint a run folder without a state starts from (default {CHECKPOINT}).")

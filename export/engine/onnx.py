@@ -42,7 +42,7 @@ class _Graph(nn.Module):
 def export(net, path, provenance=None, size=128, run_size=None, specular_level="absolute"):
     """Write ``net`` (eval mode, fp32) to ``path`` as ONNX; ``run_size``: the training's image size,
     recorded for the runtime (None: the runtime runs it at the size it is given); ``specular_level``:
-    the F0 the maps stage was trained on (:data:`export.engine.batches.SPECULAR_LEVELS`), recorded when
+    the F0 the maps stage was trained on (:data:`svbrdf_cli.conventions.SPECULAR_LEVELS`), recorded when
     it is at the photo's level, so that the runtime scales it as the diffuse."""
     net = net.eval().float()
     x = (torch.rand(1, 3, size, size), torch.zeros(1, 4, size, size), torch.rand(1, 10, size, size))

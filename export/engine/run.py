@@ -77,7 +77,7 @@ class RunConfig:
     #: Decay per step of the moving average of the training stage's weights (:meth:`Run.averaged`),
     #: the weights evaluated and exported; 0: none.
     ema_decay: float = 0.9995
-    #: The maps stage's F0 target (:data:`export.engine.batches.SPECULAR_LEVELS`): the material's, or at
+    #: The maps stage's F0 target (:data:`svbrdf_cli.conventions.SPECULAR_LEVELS`): the material's, or at
     #: the photo's flash level as the diffuse (an export records it; the runtime then scales F0 as it
     #: scales the diffuse).
     specular_level: str = "absolute"

@@ -205,10 +205,6 @@ def roughness_from_observed(roughness, diffuse, highlight):
     return np.clip(r - (1.0 - o) * low, 0.0, 1.0)[..., None].astype(np.float32)
 
 
-#: How an export reads F0 (``specular_level`` in its metadata; :data:`export.engine.batches.SPECULAR_LEVELS`).
-SPECULAR_LEVELS = ("absolute", "photo")
-
-
 def is_swift(folder):
     """Whether ``folder`` holds a swift chain (else a folder of per-stage networks)."""
     return os.path.isfile(os.path.join(folder, FILE))
@@ -239,9 +235,9 @@ class SwiftModel:
         #: "photo": the chain reads F0 at the photo's flash level, as the diffuse (the capture scales both
         #: to the photo as shot); "absolute": the material's F0, kept as it is.
         self.specular_level = meta.get("specular_level", "absolute")
-        if self.specular_level not in SPECULAR_LEVELS:
+        if self.specular_level not in cv.SPECULAR_LEVELS:
             raise ModelError(f"'{path}' reads F0 at {self.specular_level!r}, which this tool does not know "
-                             f"({', '.join(SPECULAR_LEVELS)}); update svbrdf or re-export it.")
+                             f"({', '.join(cv.SPECULAR_LEVELS)}); update svbrdf or re-export it.")
         self.timings = {}
         self.found = self.fit = None
         self.passes = PASSES

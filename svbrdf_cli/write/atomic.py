@@ -88,12 +88,18 @@ def make_temporary(parent):
     try:
         ownership.mark_temporary(tmp)
     except OSError:  # (a full disk): our folder and its half marker go, not left unrecognisable
-        with contextlib.suppress(OSError):
-            with contextlib.suppress(FileNotFoundError):
-                os.remove(os.path.join(tmp, ownership.TEMP_MARKER))
-            os.rmdir(tmp)
+        _remove_unmarked(tmp)
         raise
     return tmp
+
+
+def _remove_unmarked(path):
+    """Remove a temporary folder of ours holding at most its (empty or half-written) marker: by ``rmdir``,
+    which fails, and leaves it, if anything else is in it."""
+    with contextlib.suppress(OSError):
+        with contextlib.suppress(FileNotFoundError):
+            os.remove(os.path.join(path, ownership.TEMP_MARKER))
+        os.rmdir(path)
 
 
 def write_set(folder, write_files, force, extra=None, protect=()):
@@ -221,8 +227,4 @@ def clean_partials(out):
         if ownership.stale_temporary(path):
             shutil.rmtree(path, ignore_errors=True)
         elif ownership.unmarked_orphan(path):
-            # nothing in it but an empty marker: rmdir, which fails if anything came in since the check
-            with contextlib.suppress(OSError):
-                with contextlib.suppress(FileNotFoundError):
-                    os.remove(os.path.join(path, ownership.TEMP_MARKER))
-                os.rmdir(path)
+            _remove_unmarked(path)
