@@ -198,3 +198,53 @@ def test_grout_under_the_highlight_mask_stays_where_the_chain_put_it():
     inside = spot & (np.hypot(x - 64, y - 64) < 18)
     assert lum[inside & grout].mean() < 0.75 * lum[inside & ~grout].mean()  # the lines are still there
     assert np.corrcoef(lum[inside], grout[inside])[0, 1] < -0.7  # and where they were
+
+
+def _flash_photo(colour, side=128, seed=4, roughness=0.3):
+    """A dielectric under the conventions' flash (encoded) and its true linear albedo."""
+    from svbrdf_cli.imageops import blur
+    from svbrdf_cli.shading import render_maps
+
+    g = np.random.default_rng(seed)
+    grain = blur(g.normal(0.0, 1.0, (side, side)).astype(np.float32), 1.5)
+    albedo = (np.float32(colour) * (1.0 + 0.2 * grain / grain.std())[..., None]).astype(np.float32)
+    maps = {"normal": np.tile(np.float32([0, 0, 1]), (side, side, 1)), "diffuse": albedo,
+            "roughness": np.full((side, side, 1), roughness, np.float32),
+            "specular": np.full((side, side, 3), cv.DIELECTRIC_F0, np.float32)}
+    lin = render_maps(maps, light=cv.FLASH_POSITION, intensity=cv.FLASH_INTENSITY)
+    return cv.image_to_encoded(np.clip(lin, 0.0, 1.0)).astype(np.float32), albedo
+
+
+def test_the_diffuse_level_goes_halfway_to_the_estimates_and_keeps_the_chains_pattern():
+    """A chain's diffuse read up to twice too bright, per channel, comes back to the geometric mean of
+    its level and the physical estimate's (which reads this plain photo near the truth); its
+    pattern is kept; weight 0 changes nothing, weight 1 takes the estimate's level."""
+    from svbrdf_cli.infer import physical
+    from svbrdf_cli.infer.swift import level_with_estimate
+
+    photo, albedo = _flash_photo((0.20, 0.15, 0.08))
+    est = cv.albedo_to_linear(physical.estimate(photo)[0]["diffuse"]).reshape(-1, 3).mean(0)
+    truth = albedo.reshape(-1, 3).mean(0)
+    assert np.all(np.abs(est / truth - 1) < 0.2)  # the estimate reads this photo's level (0.88 of it)
+    chain = albedo * np.float32([2.0, 1.5, 1.0])  # the chain's own reading: too bright, and not alike per channel
+    out = cv.albedo_to_linear(level_with_estimate(cv.albedo_to_stored(chain), photo))
+    got = out.reshape(-1, 3).mean(0)
+    own = chain.reshape(-1, 3).mean(0)
+    assert np.allclose(got, np.sqrt(own * est), rtol=0.02)
+    for c in range(3):
+        assert np.corrcoef(out[..., c].ravel(), albedo[..., c].ravel())[0, 1] > 0.999  # the pattern is the chain's
+    same = level_with_estimate(cv.albedo_to_stored(chain), photo, weight=0.0)
+    assert np.allclose(cv.albedo_to_linear(same), chain, atol=2e-3)
+    full = cv.albedo_to_linear(level_with_estimate(cv.albedo_to_stored(chain), photo, weight=1.0))
+    assert np.allclose(full.reshape(-1, 3).mean(0), est, rtol=0.02)
+
+
+def test_the_estimates_level_is_read_at_the_networks_size():
+    """With ``size`` the estimate reads the photo area-shrunk to the chain's size: the level is the same."""
+    from svbrdf_cli.infer.swift import level_with_estimate
+
+    photo, albedo = _flash_photo((0.25, 0.25, 0.25), side=256)
+    chain = cv.albedo_to_stored(albedo * 2.0)
+    big = cv.albedo_to_linear(level_with_estimate(chain, photo)).mean()
+    small = cv.albedo_to_linear(level_with_estimate(chain, photo, size=128)).mean()
+    assert abs(small / big - 1) < 0.05
