@@ -55,6 +55,15 @@ MARGIN = 32
 #: the 48 generated known-light captures 0.0731 -> 0.0722. Mirrored passes read Des19 as well but the
 #: card worse (0.1282-0.1286).
 PASSES = ((0, False), (2, False))
+#: Sizes (px) at which the chain also reads the normals (on :data:`PASSES`), averaged with its reading at
+#: the run's size; the other maps are the run size's. A photo's relief shows at more than one scale, and
+#: the chain, trained at 128 px, reads each a little differently. Measured with the installed chain
+#: through ``svbrdf capture`` (``capture_eval --all-card``; 48 generated known-light captures): with
+#: none, Des19 normal 0.0505, relief 0.382, the card 0.1233 (9 inputs 0.1497), known lights 0.0731;
+#: with 160, 0.0505, **0.395**, 0.1235 (0.1498), 0.0728. With 96 instead: relief 0.371, the card
+#: 0.1225; 192: 0.398, 0.0508, 0.1244; 160 and 192: 0.399, 0.0508, 0.1242. All the maps at 128 and
+#: 160 read the card worse (0.1299 against 0.1262, an earlier runtime).
+NORMAL_SIZES = (160,)
 #: The maps whose trend with the distance to the flash's foot is divided out (:func:`flatten_flash_trends`).
 #: The specular too: on a speaker grille (``paper_real`` IMG_7381) the chain's F0 held a pale disc round
 #: the flash, which the glTF preset turned into a metallic disc (mean metallic 0.117, 0.034 with F0
@@ -241,6 +250,14 @@ def level_with_estimate(diffuse, image, size=None, weight=ESTIMATE_LEVEL):
     return cv.albedo_to_stored(np.clip(scaled, 0.0, 1.0)).astype(np.float32)
 
 
+def _unit_normals(n):
+    """Stored normals of the (H, W, 3) vectors ``n`` (a sum or a resampling of unit normals), kept in
+    the upper hemisphere."""
+    n = np.array(n, np.float32)
+    n[..., 2] = np.maximum(n[..., 2], 1e-3)
+    return cv.encode_normals(cv.normalize(n)).astype(np.float32)
+
+
 def is_swift(folder):
     """Whether ``folder`` holds a swift chain (else a folder of per-stage networks)."""
     return os.path.isfile(os.path.join(folder, FILE))
@@ -322,20 +339,33 @@ class SwiftModel:
         return self.session.run(["masks", "aux", "maps"], feeds)
 
     def network(self, image):
-        """The chain's own outputs for an (H, W, 3) encoded photo, at the photo's size."""
-        import cv2
-
+        """The chain's own outputs for an (H, W, 3) encoded photo, at the photo's size: its maps and
+        extras at the run's size, its normals averaged with those it reads at :data:`NORMAL_SIZES`."""
         img = np.asarray(image, dtype=np.float32)
         if img.ndim != 3 or img.shape[-1] != 3:
             raise ValueError(f"expected an (H, W, 3) image, got shape {img.shape}")
-        full = img.shape[:2]
         t0 = time.perf_counter()
         light = self.flash(img)  # on the whole photo: surface units do not depend on the size
-        if self.run_size and max(full) > self.run_size:
-            s = self.run_size / max(full)
+        t1 = time.perf_counter()
+        out = self.run_at(img, light, self.run_size)
+        if self.run_size and max(img.shape[:2]) > self.run_size:
+            normals = [cv.decode_normals(out["normal"])]
+            normals += [cv.decode_normals(self.run_at(img, light, s)["normal"]) for s in NORMAL_SIZES]
+            out["normal"] = _unit_normals(sum(normals))
+        self.timings = {"physical": t1 - t0, "chain": time.perf_counter() - t1}
+        return out
+
+    def run_at(self, img, light, size):
+        """The chain's outputs for the encoded photo ``img`` with its flash at ``light``, run with the
+        photo area-shrunk to ``size`` (None or larger than the photo: as it is) on :data:`PASSES`,
+        brought back to the photo's size."""
+        import cv2
+
+        full = img.shape[:2]
+        if size and max(full) > size:
+            s = size / max(full)
             img = shrink_to(img, (max(1, round(full[0] * s)), max(1, round(full[1] * s))))
         h, w = img.shape[:2]
-        t1 = time.perf_counter()
         m, pad, mode = padding(h, w, self.multiple, MARGIN)
 
         def feed(x):
@@ -352,7 +382,6 @@ class SwiftModel:
             res = tta.untransform_maps(dict(zip(cv.MAP_NAMES, np.split(own(maps), [3, 6, 7], axis=-1))), k, mirror)
             res["extra"] = tta.untransform_image(np.concatenate([own(masks), own(aux)], -1), k, mirror)
             total = res if total is None else {n: total[n] + res[n] for n in total}
-        self.timings = {"physical": t1 - t0, "chain": time.perf_counter() - t1}
         mean = {n: v / np.float32(len(self.passes)) for n, v in total.items()}
 
         def full_size(x, interpolation=cv2.INTER_CUBIC):
@@ -363,9 +392,7 @@ class SwiftModel:
 
         out = {n: full_size(mean[n]) for n in cv.MAP_NAMES}
         if (h, w) != full or len(self.passes) > 1:  # resized or averaged: unit vectors again
-            n = cv.decode_normals(out["normal"])
-            n[..., 2] = np.maximum(n[..., 2], 1e-3)  # stay in the upper hemisphere
-            out["normal"] = cv.encode_normals(cv.normalize(n)).astype(np.float32)
+            out["normal"] = _unit_normals(cv.decode_normals(out["normal"]))
         extra = full_size(mean["extra"], cv2.INTER_LINEAR)
         names = OUTPUTS["masks"] + OUTPUTS["aux"]
         out.update({name: extra[..., 3 * i:3 * i + 3] for i, name in enumerate(names)})

@@ -604,6 +604,35 @@ def test_the_runtime_runs_the_chain_at_the_size_it_trained_at(tmp_path):
     assert np.abs(out["roughness"][::2, ::2] - out["roughness"][1::2, 1::2]).mean() < 0.02
 
 
+def test_the_normals_are_also_read_at_the_normal_sizes_and_averaged(tmp_path):
+    """A photo larger than the run's size: the maps are the chain's at the run's size, the normals the
+    unit mean of its normals there and at each of ``NORMAL_SIZES``; a photo no larger than the run's
+    size is read once."""
+    pytest.importorskip("onnxruntime")
+    from export.engine import onnx as engine_onnx
+    from svbrdf_cli.infer import swift
+    from svbrdf_cli.infer.registry import load_model
+
+    assert swift.NORMAL_SIZES == (160,)
+    net = _speaking_net()
+    folder = tmp_path / "swift"
+    engine_onnx.export(net, str(folder / "chain.onnx"), provenance={}, run_size=64)
+    model = load_model(str(folder))
+    g = torch.Generator().manual_seed(6)
+    img = (0.3 + 0.4 * torch.rand(192, 192, 3, generator=g)).numpy()
+    light = np.array([0.1, 0.2, 2.2])
+    model.flash = lambda image: light
+    out = model.network(img)
+    at64, at160 = model.run_at(img, light, 64), model.run_at(img, light, 160)
+    for k in ("diffuse", "roughness", "specular", "M_h", "I_hr"):
+        assert np.array_equal(out[k], at64[k]), k
+    mean = cv.normalize(cv.decode_normals(at64["normal"]) + cv.decode_normals(at160["normal"]))
+    assert np.abs(cv.decode_normals(out["normal"]) - mean).max() < 2e-3
+    assert np.abs(at64["normal"] - at160["normal"]).max() > 1e-2  # the two readings differ: the test can fail
+    small = img[:64, :64]
+    assert np.array_equal(model.network(small)["normal"], model.run_at(small, light, 64)["normal"])
+
+
 def test_the_engine_exports_the_averaged_weights_and_the_run_size(tmp_path, small_bank):
     ort = pytest.importorskip("onnxruntime")
     pytest.importorskip("onnx")
