@@ -121,7 +121,7 @@ def cli(tables):
     from svbrdf_cli.infer.exposure import network_input
 
     real = stability.real_crops(shared_root() / "data" / "real", REAL_PHOTOS)
-    res = evaluate(method_zoo.available(), [(name, network_input(lin)) for name, lin in real], log=click.echo)
+    res = evaluate(method_zoo.available(refined=True), [(name, network_input(lin)) for name, lin in real], log=click.echo)
     os.makedirs(tables, exist_ok=True)
     text = table(res)
     with open(os.path.join(tables, "colour.md"), "w") as f:
