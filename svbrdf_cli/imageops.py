@@ -65,6 +65,16 @@ def shrink_to(image, shape):
     return cv2.resize(image, (shape[1], shape[0]), interpolation=cv2.INTER_AREA).reshape(*shape, image.shape[-1])
 
 
+def shrink_longest(image, size):
+    """(h, w, C) ``image`` area-filtered so that its longer side is ``size`` (aspect kept); as it is when
+    ``size`` is None or the image is no larger."""
+    h, w = image.shape[:2]
+    if not size or max(h, w) <= size:
+        return image
+    s = size / max(h, w)
+    return shrink_to(image, (max(1, round(h * s)), max(1, round(w * s))))
+
+
 def blur(image, sigma):
     """Gaussian blur of standard deviation ``sigma`` pixels, reflecting at the borders.
 

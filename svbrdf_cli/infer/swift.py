@@ -32,7 +32,7 @@ import time
 import numpy as np
 
 from svbrdf_cli import conventions as cv
-from svbrdf_cli.imageops import shrink_to
+from svbrdf_cli.imageops import shrink_longest
 from svbrdf_cli.infer import flash_fields, tta
 from svbrdf_cli.infer.chain import SWIFT_FILE as FILE
 from svbrdf_cli.infer.chain import ModelError, padding, session
@@ -238,10 +238,7 @@ def level_with_estimate(diffuse, image, size=None, weight=ESTIMATE_LEVEL):
     half: the real card and the artist materials gain, the bank's kind loses least."""
     from svbrdf_cli.infer import physical
 
-    img = np.asarray(image, np.float32)
-    if size and max(img.shape[:2]) > size:
-        s = size / max(img.shape[:2])
-        img = shrink_to(img, (max(1, round(img.shape[0] * s)), max(1, round(img.shape[1] * s))))
+    img = shrink_longest(np.asarray(image, np.float32), size)
     est = cv.albedo_to_linear(physical.estimate(img)[0]["diffuse"]).reshape(-1, 3).mean(0)
     lin = cv.albedo_to_linear(np.asarray(diffuse, np.float32))
     own = lin.reshape(-1, 3).mean(0)
@@ -350,21 +347,20 @@ class SwiftModel:
         out = self.run_at(img, light, self.run_size)
         if self.run_size and max(img.shape[:2]) > self.run_size:
             normals = [cv.decode_normals(out["normal"])]
-            normals += [cv.decode_normals(self.run_at(img, light, s)["normal"]) for s in NORMAL_SIZES]
+            normals += [cv.decode_normals(self.run_at(img, light, s, ("normal",))["normal"]) for s in NORMAL_SIZES]
             out["normal"] = _unit_normals(sum(normals))
         self.timings = {"physical": t1 - t0, "chain": time.perf_counter() - t1}
         return out
 
-    def run_at(self, img, light, size):
+    def run_at(self, img, light, size, names=None):
         """The chain's outputs for the encoded photo ``img`` with its flash at ``light``, run with the
         photo area-shrunk to ``size`` (None or larger than the photo: as it is) on :data:`PASSES`,
-        brought back to the photo's size."""
+        brought back to the photo's size: the maps of ``names`` only, or every map and the masks and
+        auxiliary renderings (None)."""
         import cv2
 
         full = img.shape[:2]
-        if size and max(full) > size:
-            s = size / max(full)
-            img = shrink_to(img, (max(1, round(full[0] * s)), max(1, round(full[1] * s))))
+        img = shrink_longest(img, size)
         h, w = img.shape[:2]
         m, pad, mode = padding(h, w, self.multiple, MARGIN)
 
@@ -390,9 +386,11 @@ class SwiftModel:
                 x = np.clip(cv2.resize(x, (full[1], full[0]), interpolation=interpolation), 0.0, 1.0)
             return x.reshape(full + (-1,))
 
-        out = {n: full_size(mean[n]) for n in cv.MAP_NAMES}
-        if (h, w) != full or len(self.passes) > 1:  # resized or averaged: unit vectors again
+        out = {n: full_size(mean[n]) for n in (names or cv.MAP_NAMES)}
+        if "normal" in out and ((h, w) != full or len(self.passes) > 1):  # resized or averaged: unit vectors again
             out["normal"] = _unit_normals(cv.decode_normals(out["normal"]))
+        if names:
+            return out
         extra = full_size(mean["extra"], cv2.INTER_LINEAR)
         names = OUTPUTS["masks"] + OUTPUTS["aux"]
         out.update({name: extra[..., 3 * i:3 * i + 3] for i, name in enumerate(names)})
