@@ -130,15 +130,16 @@ def measure(folder, image):
             "relief": float(widths.max() - widths.min()), "height_trend": height_trend(height, spot)}
 
 
-def run(names=None, keep=None, log=print, model_name=None):
+def run(names=None, keep=None, log=print, model_name=None, refine=None):
     """Capture every photo (glTF preset, default options; ``model_name``: what ``--model`` takes, the
-    default when None) and measure it; returns [(name, row)]."""
+    default when None; ``refine``: ``--refine``'s steps, None for its default) and measure it; returns
+    [(name, row)]."""
     from svbrdf_cli.imageops import resize
     from svbrdf_cli.infer.registry import DEFAULT_MODEL, load_model
     from svbrdf_cli.ingest import photo as ingest
     from svbrdf_cli.run import pipeline
 
-    opts = pipeline.Options(preset="gltf")
+    opts = pipeline.Options(preset="gltf", **({} if refine is None else {"refine": refine}))
     model_name = model_name or DEFAULT_MODEL
     model = load_model(model_name)
     out_root = keep or tempfile.mkdtemp(prefix="svbrdf-artist-")
@@ -186,9 +187,10 @@ def table(rows):
 @click.option("--photo", "names", multiple=True, help="Only photos whose name holds this (repeatable).")
 @click.option("--keep", type=click.Path(file_okay=False), default=None, help="Keep the glTF sets in this folder.")
 @click.option("--model", "model_name", default=None, help="What `svbrdf capture --model` takes (default: its default).")
-def cli(names, keep, model_name):
+@click.option("--refine", type=int, default=None, help="What `svbrdf capture --refine` takes (default: its default).")
+def cli(names, keep, model_name, refine):
     """Capture the real photos with the glTF preset and measure what an artist would reject."""
-    rows = run(names, keep, log=click.echo, model_name=model_name)
+    rows = run(names, keep, log=click.echo, model_name=model_name, refine=refine)
     click.echo(table(rows))
 
 

@@ -26,7 +26,10 @@ class Model(Protocol):
         Returns:
             {name: (H, W, C) float32} with the four maps of :data:`svbrdf_cli.conventions.MAP_NAMES`
             in their stored encoding (roughness one channel), plus what the model shows on the way
-            (masks, auxiliary renderings, the fitted flash) for ``--debug``.
+            (masks, auxiliary renderings, the fitted flash) for ``--debug``, and optionally
+            ``hidden``, an (H, W) bool mask where the highlight hid the albedo without clipping: the
+            capture gives the diffuse the photo's own fine detail there at the output size
+            (:func:`svbrdf_cli.infer.physical.photo_detail_under_highlight`).
         """
 
     @property

@@ -107,10 +107,28 @@ def fill_highlight(diffuse, image, highlight=None):
     0.0374 -> 0.0367, 0.0575 -> 0.0572, the card 0.1415 -> 0.1418 (above 0.3: 0.0371, 0.0573, 0.1416).
     Filling where the estimate's fitted lobe is above 0.8 of the photo instead raised the card's
     error (0.1527; above 0.5: 0.1624)."""
+    from svbrdf_cli.imageops import fill_from_surroundings, luminance
+    from svbrdf_cli.infer.physical import relative_texture, texture_beside
+
+    mask, clipped = hidden_by_highlight(image, highlight)
+    if not mask.any():
+        return diffuse
+    lin = cv.albedo_to_linear(diffuse)
+    # the chain's own detail where the photo still showed the albedo through the highlight; where it
+    # clipped, the texture just beside
+    detail = np.where(clipped, texture_beside(lin, mask), relative_texture(luminance(lin)))
+    lin = fill_from_surroundings(lin, mask, detail)
+    return cv.albedo_to_stored(np.clip(lin, 0.0, 1.0)).astype(np.float32)
+
+
+def hidden_by_highlight(image, highlight=None):
+    """(hidden, clipped): (H, W) masks of the encoded ``image`` where the highlight hid the albedo
+    (:func:`fill_highlight` fills them) and, among them, where the photo clipped (white at its plateau,
+    :func:`svbrdf_cli.conventions.clip_level`), each with :data:`FILL_MARGIN` round it."""
     import cv2
 
-    from svbrdf_cli.imageops import fill_from_surroundings, luminance
-    from svbrdf_cli.infer.physical import CLIPPED, relative_texture, texture_beside
+    from svbrdf_cli.imageops import luminance
+    from svbrdf_cli.infer.physical import CLIPPED
 
     img = np.asarray(image, np.float32)
     level = cv.clip_level(img)
@@ -122,20 +140,12 @@ def fill_highlight(diffuse, image, highlight=None):
         marked = luminance(np.asarray(highlight, np.float32)) > HIGHLIGHT_MASK
         if marked.mean() <= MAX_MASK_SHARE:
             mask |= marked
-    if not mask.any():
-        return diffuse
     k = max(3, int(FILL_MARGIN * img.shape[1]) | 1)
 
     def grow(m):
         return cv2.dilate(m.astype(np.uint8), np.ones((k, k), np.uint8)).astype(bool)
 
-    mask = grow(mask)
-    lin = cv.albedo_to_linear(diffuse)
-    # the chain's own detail where the photo still showed the albedo through the highlight; where it
-    # clipped, the texture just beside
-    detail = np.where(grow(clipped), texture_beside(lin, mask), relative_texture(luminance(lin)))
-    lin = fill_from_surroundings(lin, mask, detail)
-    return cv.albedo_to_stored(np.clip(lin, 0.0, 1.0)).astype(np.float32)
+    return grow(mask), grow(clipped)
 
 
 def flatten_flash_trends(stored, rho, names=("diffuse", "roughness")):
@@ -321,10 +331,13 @@ class SwiftModel:
         highlight hid it (:func:`fill_highlight`) and the flash's trends taken off it
         (:func:`flatten_flash_trends`), the roughness carried from where the highlight showed
         (:func:`roughness_from_observed`), the diffuse's level halfway to the physical estimate's
-        (:func:`level_with_estimate`)."""
+        (:func:`level_with_estimate`); ``hidden``: where the highlight hid the albedo but the photo did
+        not clip (:func:`hidden_by_highlight`)."""
         out = self.network(image)
         t0 = time.perf_counter()
         out["diffuse"] = fill_highlight(out["diffuse"], image, out["M_h"])
+        hidden, clipped = hidden_by_highlight(image, out["M_h"])
+        out["hidden"] = hidden & ~clipped
         out.update(flatten_flash_trends(out, self.fit.rho, FLATTENED))
         out["roughness"] = roughness_from_observed(out["roughness"], out["diffuse"], out["M_h"])
         out["diffuse"] = level_with_estimate(out["diffuse"], image, self.run_size)

@@ -240,6 +240,10 @@ def infer_set(prepared, chain, out_root, opts, model_name="physical", progress=N
 
         start = transfer(stored, low_refined, start)
     stored = start
+    if out.get("hidden") is not None:  # the photo's own detail where the highlight hid the diffuse
+        from svbrdf_cli.infer.physical import photo_detail_under_highlight
+
+        stored["diffuse"] = photo_detail_under_highlight(stored["diffuse"], high, out["hidden"])
     for k, v in stored.items():
         if not np.isfinite(v).all():
             raise SvbrdfError(f"The model produced non-finite values for '{p.path}' ({k}); please report this photo.")

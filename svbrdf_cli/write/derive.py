@@ -57,12 +57,11 @@ def specular_to_metallic(diffuse, specular):
     Dark materials are ambiguous: a dark dielectric and a dark grey metal
     reflect alike, and just above S = F0 the quadratic's larger root over a
     dark diffuse is large (diffuse 0.02 with F0 0.045 solves to m = 0.58).
-    So a specular in the dielectric range (brightness up to
-    :data:`svbrdf_cli.conventions.DIELECTRIC_MAX_F0`, any tint) is a dielectric, m = 0, and the root is
-    faded in up to :data:`svbrdf_cli.conventions.METAL_MIN_F0` (:func:`svbrdf_cli.conventions.metal_weight`).
-    Pure dielectrics (specular = F0) and metals brighter than
-    :data:`svbrdf_cli.conventions.METAL_MIN_F0` (diffuse = 0) round-trip exactly through
-    ``diffuse = base (1 - m), specular = lerp(F0, base, m)``.
+    So a specular short of halfway to a metal's (brightness up to
+    ``METAL_CALL_F0[0]`` of :data:`svbrdf_cli.conventions.METAL_CALL_F0`, any tint) is a dielectric,
+    m = 0, and the root is faded in up to ``METAL_CALL_F0[1]`` (:func:`svbrdf_cli.conventions.metal_call`).
+    Pure dielectrics (specular = F0) and metals brighter than that (diffuse = 0) round-trip exactly
+    through ``diffuse = base (1 - m), specular = lerp(F0, base, m)``.
 
     Args:
         diffuse: (..., 3) linear diffuse albedo in [0, 1].
@@ -81,7 +80,7 @@ def specular_to_metallic(diffuse, specular):
     c = f0 - bs
     disc = np.maximum(b * b - 4.0 * f0 * c, 0.0)
     m = ((np.sqrt(disc) - b) / (2.0 * f0)).clip(0.0, 1.0)
-    m = m * cv.metal_weight(bs)
+    m = m * cv.metal_call(bs)
     eps = 1e-6
     from_diffuse = d * (keep / (1.0 - f0) / np.maximum(1.0 - m, eps))
     from_specular = (s - f0 * (1.0 - m)) / np.maximum(m, eps)

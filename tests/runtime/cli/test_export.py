@@ -131,3 +131,19 @@ def test_a_folder_that_is_no_set_is_refused_naming_what_is_accepted(tmp_path):
                  ["export", tmp_path / "photos", "-o", tmp_path / "e", "--preset", "gltf"]):
         code, output = run(*args)
         assert code == 1 and "native set" in output and "--preset gltf, unreal, unity-hdrp or blender" in output, output
+
+
+def test_a_grey_f0_short_of_halfway_to_a_metals_is_a_dielectric_in_the_engine_sets(tmp_path):
+    # black plastic read at F0 0.2 (a chain's hedge between a dielectric's 0.04 and a grey metal's 0.56,
+    # more likely the dielectric) is not metal; iron at 0.56 is; nothing in between jumps
+    h, w = 8, 48
+    level = np.repeat(np.linspace(0.04, 0.6, w)[None], h, 0)[..., None] * np.ones(3, np.float32)
+    maps = {"normal": np.tile(np.float32([0, 0, 1]), (h, w, 1)), "diffuse": np.full((h, w, 3), 0.004, np.float32),
+            "roughness": np.full((h, w, 1), 0.4, np.float32), "specular": level.astype(np.float32)}
+    mapset.write_map_set(tmp_path / "case", maps, bits=16)
+    code, output = run("export", tmp_path / "case", "-o", tmp_path / "g", "--preset", "gltf")
+    assert code == 0, output
+    metallic = read_image(tmp_path / "g" / "metallicRoughness.png")[..., 2].mean(0)
+    f0 = level[0, :, 0]
+    assert metallic[f0 < 0.21].max() == 0.0 and metallic[f0 > 0.39].min() > 0.98
+    assert np.abs(np.diff(metallic)).max() < 0.35  # a ramp over the band, not a step

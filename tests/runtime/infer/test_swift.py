@@ -248,3 +248,34 @@ def test_the_estimates_level_is_read_at_the_networks_size():
     big = cv.albedo_to_linear(level_with_estimate(chain, photo)).mean()
     small = cv.albedo_to_linear(level_with_estimate(chain, photo, size=128)).mean()
     assert abs(small / big - 1) < 0.05
+
+
+def test_the_photos_fine_detail_under_a_highlight_reaches_the_diffuse():
+    from svbrdf_cli.imageops import blur, luminance
+    from svbrdf_cli.infer.physical import photo_detail_under_highlight
+
+    n = 128
+    rho = _rho(n, foot=(0.0, 0.0))
+    g = np.random.default_rng(5)
+    grain = blur(g.standard_normal((n, n)).astype(np.float32), 0.7)
+    grain /= grain.std()
+    albedo = (0.3 * (1 + 0.15 * grain))[..., None] * np.array([0.8, 0.6, 0.4], np.float32)
+    shading = 1.2 - 0.3 * rho  # the flash's falloff
+    lobe = 0.6 * np.exp(-(rho / 0.2) ** 2)  # a smooth white highlight, not clipped
+    photo = cv.image_to_encoded(np.clip(albedo * shading[..., None] + lobe[..., None], 0, 1))
+    spot = rho < 0.2
+    diffuse = np.where(spot[..., None], blur(albedo, 6.0), albedo)  # a model's smooth fill under it
+    stored = cv.albedo_to_stored(diffuse).astype(np.float32)
+    out = cv.albedo_to_linear(photo_detail_under_highlight(stored, photo, spot))
+
+    def fine(x):
+        lum = luminance(x)
+        return lum - blur(lum, 2.0)
+
+    truth, before, after = fine(albedo)[spot], fine(diffuse)[spot], fine(out)[spot]
+    assert np.corrcoef(truth, after)[0, 1] > 0.8  # the albedo's own grain, read through the highlight
+    assert after.std() > 3 * before.std() and after.std() < 1.5 * truth.std()  # no more than round it
+    assert abs(luminance(out)[spot].mean() / luminance(diffuse)[spot].mean() - 1) < 0.05  # the level kept
+    np.testing.assert_array_equal(out[~spot], cv.albedo_to_linear(stored)[~spot])  # the rest as it was
+    none = photo_detail_under_highlight(stored, photo, np.zeros((n, n), bool))
+    np.testing.assert_array_equal(none, stored)

@@ -60,8 +60,8 @@ def right(img):
 
 @pytest.mark.parametrize("m", [0.0, 1.0])
 def test_solve_metallic_round_trips_pure_materials(m):
-    # (a metal's colour brighter than METAL_MIN_F0: dimmer "metals" are read as dielectrics, below)
-    colour = np.random.default_rng(1).uniform(0.2, 1.0, (200, 3))
+    # (a metal's colour brighter than METAL_CALL_F0: dimmer "metals" are read as dielectrics, below)
+    colour = np.random.default_rng(1).uniform(0.4, 1.0, (200, 3))
     diffuse, specular = metalness_forward(colour, m)
     base, metallic = derive.specular_to_metallic(diffuse, specular)
     assert metallic.shape == (200, 1)
@@ -71,10 +71,10 @@ def test_solve_metallic_round_trips_pure_materials(m):
 
 def test_solve_metallic_inverts_its_forward_model_for_grey():
     # The spec-gloss extension's forward model: diffuse (1 - max(spec)) = base (1 - F0) (1 - m).
-    base = np.linspace(0.1, 1.0, 10)[:, None].repeat(3, 1)
-    m = np.linspace(0.05, 0.95, 10)[:, None]
+    b, m = np.meshgrid(np.linspace(0.1, 1.0, 10), np.linspace(0.05, 0.95, 10))
+    base, m = b.reshape(-1, 1).repeat(3, 1), m.reshape(-1, 1)
     specular = F0 + (base - F0) * m
-    clear = specular[:, 0] >= cv.METAL_MIN_F0  # (below it the metallic root is faded out: see the next tests)
+    clear = specular[:, 0] >= cv.METAL_CALL_F0[1]  # (below it the metallic root is faded out: see the next tests)
     base, m, specular = base[clear], m[clear], specular[clear]
     assert len(m) >= 6
     diffuse = base * (1 - F0) * (1 - m) / (1 - specular.max(-1, keepdims=True))
@@ -114,7 +114,7 @@ def test_metallic_fades_in_without_a_step():
     s = np.linspace(F0, 0.6, 400)[:, None].repeat(3, 1)
     _, m = derive.specular_to_metallic(np.zeros_like(s), s)
     m = m[:, 0]
-    assert m[s[:, 0] <= cv.DIELECTRIC_MAX_F0].max() == 0.0 and m[s[:, 0] >= cv.METAL_MIN_F0].min() > 0.99
+    assert m[s[:, 0] <= cv.METAL_CALL_F0[0]].max() == 0.0 and m[s[:, 0] >= cv.METAL_CALL_F0[1]].min() > 0.99
     assert np.all(np.diff(m) >= -1e-6) and np.abs(np.diff(m)).max() < 0.05  # (a step would be 1)
 
 
@@ -249,7 +249,7 @@ def test_unity_hdrp_layout(maps, tmp_path):
 
 def test_unity_mask_map_keeps_data_under_partial_alpha(tmp_path):
     # metallic 0.5 with smoothness 0.5: a writer that treats A as opacity would store R = 1.
-    base, m = np.full((4, 4, 3), 0.5), 0.5
+    base, m = np.full((4, 4, 3), 0.8), 0.5  # (F0 0.42: past METAL_CALL_F0, a metal's)
     specular = F0 + (base - F0) * m
     diffuse = base * (1 - F0) * (1 - m) / (1 - specular.max(-1, keepdims=True))
     maps = {"normal": np.tile(np.float32([0, 0, 1]), (4, 4, 1)), "diffuse": diffuse.astype(np.float32),
