@@ -75,8 +75,10 @@ def _setup(threads):
 @click.option("--specular-level", type=click.Choice(SPECULAR_LEVELS), default=None,
               help="The maps stage's F0 target from now on: the material's, or at the photo's flash level as "
                    "the diffuse (the run keeps it).")
+@click.option("--halve-every", type=click.IntRange(1), default=None,
+              help="The learning rate halves every this many samples of a stage from now on (the run keeps it).")
 def train(folder, threads, steps, minutes, checkpoint_minutes, eval_minutes, checkpoint, schedule, restart_stage,
-          bank_count, weight_pairs, specular_level):
+          bank_count, weight_pairs, specular_level, halve_every):
     """Train the swift chain in FOLDER, or resume it; SIGTERM/SIGINT save and exit 0."""
     import dataclasses
     import os
@@ -91,12 +93,14 @@ def train(folder, threads, steps, minutes, checkpoint_minutes, eval_minutes, che
     config = dataclasses.replace(RunConfig(), schedule=schedule) if schedule else None
     run = Run(folder, config=config, log=lambda m: click.echo(m, err=True), checkpoint=checkpoint)
     changes = {k: v for k, v in (("checkpoint_minutes", checkpoint_minutes), ("eval_minutes", eval_minutes),
-                                 ("bank_count", bank_count)) if v is not None}
+                                 ("bank_count", bank_count), ("halve_every", halve_every)) if v is not None}
     if weight_pairs:
         changes["weights"] = tuple({**dict(run.config.weights), **weight_pairs}.items())
     if specular_level and specular_level != run.config.specular_level:
         changes["specular_level"] = specular_level
         click.echo(f"the maps stage's F0 target from step {run.step}: {specular_level}", err=True)
+    if halve_every and halve_every != run.config.halve_every:
+        click.echo(f"the learning rate halves every {halve_every} samples of a stage from step {run.step}", err=True)
     if changes:
         run.config = dataclasses.replace(run.config, **changes)
         run.net.loss_weights = dict(run.config.weights)
@@ -156,7 +160,9 @@ def _schedule(text):
               help="Passed to train: the maps stage's F0 target from now on.")
 @click.option("--checkpoint", default=None,
               help=f"Passed to train: the compact checkpoint a run folder without a state starts from (default {CHECKPOINT}).")
-def background(folder, schedule, restart_stage, bank_count, weight_pairs, specular_level, checkpoint):
+@click.option("--halve-every", type=click.IntRange(1), default=None,
+              help="Passed to train: the learning rate halves every this many samples of a stage from now on.")
+def background(folder, schedule, restart_stage, bank_count, weight_pairs, specular_level, checkpoint, halve_every):
     """Resume (or start) the run in FOLDER detached, on one core; its log is FOLDER/log.txt."""
     import os
     import subprocess
@@ -179,6 +185,7 @@ def background(folder, schedule, restart_stage, bank_count, weight_pairs, specul
         args += [a for pair in weight_pairs for a in ("--weight", pair)]
         args += ["--specular-level", specular_level] if specular_level else []
         args += ["--checkpoint", checkpoint] if checkpoint else []
+        args += ["--halve-every", str(halve_every)] if halve_every else []
         p = subprocess.Popen(args,
                              stdout=log, stderr=log, stdin=subprocess.DEVNULL, start_new_session=True, env=env)
     with open(pid_file, "w") as f:

@@ -41,11 +41,24 @@ OUTPUTS = {"masks": ("M_b", "M_h"), "aux": ("I_bf", "I_hr", "I_hr2")}
 
 #: Reflected margin round the chain's input, in pixels. The chain trained on whole 128 px photos with
 #: none, and its global features read the whole input, so the margin changes what it decides, metal
-#: above all. Measured on the installed chain (``docs/training.md``, "The input's margin"): with no
-#: margin it calls 18 of the 267 real photos metal (6 with 16 or 32 px) while it scores better on
-#: Des19's metals and the generated known-light captures; 16 px is better than 32 on Des19 and the
-#: card but worse on roughness and keeps a speaker grille metal. 32 is kept.
-MARGIN = 32
+#: above all: with 16 px the chain read two dark grey plastics of ``paper_real`` (a phone case and a
+#: speaker grille) at F0 0.5, with 32 px at 0.08, and no photo with metal in it above 0.05 with either.
+#: Read as a dielectric where it guessed a metal (:func:`read_as_dielectric`), 16 px reads the real card and Des19
+#: better. Measured through ``svbrdf capture`` (``capture_eval --all-card``; ``known_lights``) with the
+#: run's chain at 1,235k and 2,376k samples (Des19 normal, relief, diffuse, roughness, specular; the card
+#: relit from photo 00 and from each of its 9 photos; 48 generated known-light captures):
+#:
+#: ============================  ======  =====  ======  ======  ======  ======  ======  ======
+#: chain, margin                 normal  relief diffuse rough.  spec.   card    card 9  known
+#: ============================  ======  =====  ======  ======  ======  ======  ======  ======
+#: 1,235k, 32                    0.0505  0.395  0.0322  0.1117  0.0577  0.1235  0.1498  0.0728
+#: 1,235k, 16, F0 a dielectric's 0.0505  0.403  0.0320  0.1151  0.0580  0.1206  0.1437  0.0745
+#: 2,376k, 32                    0.0484  0.399  0.0322  0.1266  0.0572  0.1260  0.1488  0.0768
+#: 2,376k, 16                    0.0479  0.415  0.0317  0.1280  0.0571  0.1187  0.1420  –
+#: 2,376k, 16, F0 a dielectric's 0.0479  0.415  0.0318  0.1280  0.0578  0.1187  0.1420  0.0747
+#: 2,376k, 0                     0.0477  0.429  0.0317  0.1169  0.0594  0.1316  0.1495  –
+#: ============================  ======  =====  ======  ======  ======  ======  ======  ======
+MARGIN = 16
 #: The passes the chain runs on each photo, averaged (:mod:`svbrdf_cli.infer.tta`'s quarter turns and
 #: mirrors): the photo as it is and turned half round, the flash turned with it. A flat surface under
 #: the flash looks the same after the turn; the chain reads the two a little differently, and their
@@ -230,7 +243,15 @@ def roughness_from_observed(roughness, diffuse, highlight):
 ESTIMATE_LEVEL = 0.5
 
 
-def level_with_estimate(diffuse, image, size=None, weight=ESTIMATE_LEVEL):
+def estimate_diffuse(image, size=None):
+    """The physical estimate's stored diffuse (:func:`svbrdf_cli.infer.physical.estimate`) of the encoded
+    ``image`` area-shrunk to ``size`` first (None: as it is)."""
+    from svbrdf_cli.infer import physical
+
+    return physical.estimate(shrink_longest(np.asarray(image, np.float32), size))[0]["diffuse"]
+
+
+def level_with_estimate(diffuse, image, size=None, weight=ESTIMATE_LEVEL, estimate=None):
     """The stored ``diffuse`` scaled, per channel, to the weighted geometric mean of its own mean
     linear level and the physical estimate's (:func:`svbrdf_cli.infer.physical.estimate` of the encoded
     ``image``, area-shrunk to ``size`` first): the chain's pattern and colour ratios kept.
@@ -245,16 +266,51 @@ def level_with_estimate(diffuse, image, size=None, weight=ESTIMATE_LEVEL):
     relit from photo 00 0.1257, 0.1233, 0.1224, 0.1217; with weights 0, 0.5 and 1, the card relit from
     each of its 9 photos 0.1511, 0.1497, 0.1486 and the 48 generated known-light captures
     (``known_lights``, the bank's own kind of material) the other way, 0.0711, 0.0731, 0.0756. Half and
-    half: the real card and the artist materials gain, the bank's kind loses least."""
-    from svbrdf_cli.infer import physical
-
-    img = shrink_longest(np.asarray(image, np.float32), size)
-    est = cv.albedo_to_linear(physical.estimate(img)[0]["diffuse"]).reshape(-1, 3).mean(0)
+    half: the real card and the artist materials gain, the bank's kind loses least. ``estimate``: the
+    estimate's diffuse (:func:`estimate_diffuse`) if the caller has it."""
+    if estimate is None:
+        estimate = estimate_diffuse(image, size)
+    est = cv.albedo_to_linear(np.asarray(estimate, np.float32)).reshape(-1, 3).mean(0)
     lin = cv.albedo_to_linear(np.asarray(diffuse, np.float32))
     own = lin.reshape(-1, 3).mean(0)
     target = np.exp((1.0 - weight) * np.log(own + 1e-4) + weight * np.log(est + 1e-4))
     scaled = lin * (target / np.maximum(own, 1e-6)).astype(np.float32)
     return cv.albedo_to_stored(np.clip(scaled, 0.0, 1.0)).astype(np.float32)
+
+
+def read_as_dielectric(stored, estimate):
+    """The stored maps ``stored`` read as a dielectric's where the chain guessed a metal: its F0's
+    brightness (luminance, linear) at most :data:`svbrdf_cli.conventions.DIELECTRIC_MAX_F0`, its colour
+    kept, and its diffuse there the physical estimate's ``estimate`` (stored, any size), blended in as
+    the F0 rises through the band where a metal's begins (:func:`svbrdf_cli.conventions.metal_weight`):
+    the chain's diffuse under a metal's F0 is black, the photo's light given to the specular.
+
+    One auto-exposed photo does not tell a dark grey metal from a dark dielectric (a photo's level is
+    the exposure's), and the chain's F0 above a dielectric's range is its guess between them, which
+    turned with the input's margin and size: on the two dark grey plastics of ``paper_real`` (a phone
+    case, a speaker grille) 0.09-0.52 and 0.04-0.53 over margins of 16 and 32 px and sizes of 96-192 px,
+    read as metal by the engine presets; on the 7 real photos with metal in them (foil, gilding, bronze, a
+    metal sheet) it never rose above 0.05, and on Des19's metals through the capture 0.04-0.09. Read as a
+    dielectric, no photo comes out metal from the chain's guess; ``--refine`` still lets F0 take a
+    metal's colour where the photo's highlight has the material's."""
+    import cv2
+
+    from svbrdf_cli.imageops import luminance
+
+    lin = cv.albedo_to_linear(np.asarray(stored["specular"], np.float32))
+    level = luminance(lin)[..., None]
+    if not (level > cv.DIELECTRIC_MAX_F0).any():
+        return {}
+    over = level > cv.DIELECTRIC_MAX_F0
+    lowered = cv.albedo_to_stored(lin * (np.float32(cv.DIELECTRIC_MAX_F0) / np.maximum(level, 1e-6)))
+    f0 = np.where(over, lowered, np.asarray(stored["specular"], np.float32))
+    h, w = lin.shape[:2]
+    est = np.asarray(estimate, np.float32)
+    if est.shape[:2] != (h, w):
+        est = cv2.resize(est, (w, h), interpolation=cv2.INTER_LINEAR)
+    t = cv.metal_weight(level).astype(np.float32)
+    diffuse = np.asarray(stored["diffuse"], np.float32) * (1.0 - t) + est * t
+    return {"specular": f0.astype(np.float32), "diffuse": diffuse.astype(np.float32)}
 
 
 def _unit_normals(n):
@@ -330,9 +386,10 @@ class SwiftModel:
         renderings (encoded images) for ``--debug``: :meth:`network`'s, the diffuse filled where the
         highlight hid it (:func:`fill_highlight`) and the flash's trends taken off it
         (:func:`flatten_flash_trends`), the roughness carried from where the highlight showed
-        (:func:`roughness_from_observed`), the diffuse's level halfway to the physical estimate's
-        (:func:`level_with_estimate`); ``hidden``: where the highlight hid the albedo but the photo did
-        not clip (:func:`hidden_by_highlight`)."""
+        (:func:`roughness_from_observed`), read as a dielectric's where the chain guessed a metal
+        (:func:`read_as_dielectric`), the diffuse's level halfway to the physical estimate's
+        (:func:`level_with_estimate`); ``hidden``: where the highlight hid the albedo but the photo
+        did not clip (:func:`hidden_by_highlight`)."""
         out = self.network(image)
         t0 = time.perf_counter()
         out["diffuse"] = fill_highlight(out["diffuse"], image, out["M_h"])
@@ -340,7 +397,9 @@ class SwiftModel:
         out["hidden"] = hidden & ~clipped
         out.update(flatten_flash_trends(out, self.fit.rho, FLATTENED))
         out["roughness"] = roughness_from_observed(out["roughness"], out["diffuse"], out["M_h"])
-        out["diffuse"] = level_with_estimate(out["diffuse"], image, self.run_size)
+        estimate = estimate_diffuse(image, self.run_size)
+        out.update(read_as_dielectric(out, estimate))
+        out["diffuse"] = level_with_estimate(out["diffuse"], image, self.run_size, estimate=estimate)
         self.timings["physics"] = time.perf_counter() - t0
         return out
 

@@ -411,6 +411,12 @@ def test_a_weight_given_on_resume_is_the_runs_from_then_on(tmp_path, small_bank)
     assert dict(again.config.weights) == dict(CFG.weights, render=0.25, relief=0.0) and again.step == 7
     res = CliRunner().invoke(main, ["train", "--run", str(tmp_path / "run"), "--weight", "shading=1"])
     assert res.exit_code == 2 and "NAME is one of" in res.output
+    res = CliRunner().invoke(main, ["train", "--run", str(tmp_path / "run"), "--steps", "1", "--checkpoint", "",
+                                    "--halve-every", "3"])
+    assert res.exit_code == 0, res.output
+    halved = Run(str(tmp_path / "run"), log=lambda m: None, des19=[])
+    halved.stage_samples = 7
+    assert halved.config.halve_every == 3 and halved._lr() == pytest.approx(halved.config.lr / 4)  # kept, in force
 
 
 def test_sigterm_saves_and_exits_zero(tmp_path, small_bank):

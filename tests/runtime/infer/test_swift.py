@@ -279,3 +279,23 @@ def test_the_photos_fine_detail_under_a_highlight_reaches_the_diffuse():
     np.testing.assert_array_equal(out[~spot], cv.albedo_to_linear(stored)[~spot])  # the rest as it was
     none = photo_detail_under_highlight(stored, photo, np.zeros((n, n), bool))
     np.testing.assert_array_equal(none, stored)
+
+
+def test_where_the_chain_guessed_a_metal_its_maps_are_read_as_a_dielectrics():
+    from svbrdf_cli.imageops import luminance
+    from svbrdf_cli.infer.swift import read_as_dielectric
+
+    f0 = np.full((4, 8, 3), 0.04, np.float32)
+    f0[:, 4:] = np.float32([0.6, 0.45, 0.2])  # a guess at a gold metal, its diffuse black
+    diffuse = np.where(f0 > 0.05, 0.0, 0.3).astype(np.float32)
+    stored = {"diffuse": cv.albedo_to_stored(diffuse).astype(np.float32),
+              "specular": cv.albedo_to_stored(f0).astype(np.float32)}
+    estimate = np.full((2, 4, 3), 0.5, np.float32)  # the physical estimate's diffuse (stored), any size
+    out = read_as_dielectric(stored, estimate)
+    np.testing.assert_array_equal(out["specular"][:, :4], stored["specular"][:, :4])  # a dielectric's: kept
+    np.testing.assert_array_equal(out["diffuse"][:, :4], stored["diffuse"][:, :4])
+    got = cv.albedo_to_linear(out["specular"][:, 4:])
+    np.testing.assert_allclose(luminance(got), cv.DIELECTRIC_MAX_F0, rtol=1e-4)
+    np.testing.assert_allclose(got / got[..., :1], f0[:, 4:] / f0[:, 4:, :1], rtol=1e-4)  # the hue kept
+    np.testing.assert_allclose(out["diffuse"][:, 4:], 0.5, atol=1e-6)  # the photo's light, not black
+    assert read_as_dielectric({k: v[:, :4] for k, v in stored.items()}, estimate) == {}
