@@ -507,13 +507,27 @@ def photo_detail_under_highlight(diffuse, image, hidden):
     diffuse has round the spot is added."""
     import cv2
 
-    d = cv.albedo_to_linear(np.asarray(diffuse, np.float32))
-    h, w = d.shape[:2]
+    diffuse = np.asarray(diffuse, np.float32)
+    h, w = diffuse.shape[:2]
     bad = cv2.resize(np.asarray(hidden, np.uint8), (w, h), interpolation=cv2.INTER_NEAREST).astype(bool)
     if not bad.any() or bad.all():
         return diffuse
+    # on the hidden pixels' bounding box and an eighth of the width round it (their surroundings)
+    rows, cols = np.flatnonzero(bad.any(1)), np.flatnonzero(bad.any(0))
+    pad = max(8, w // 8)
+    y0, y1 = max(0, rows[0] - pad), min(h, rows[-1] + 1 + pad)
+    x0, x1 = max(0, cols[0] - pad), min(w, cols[-1] + 1 + pad)
+    out = diffuse.copy()
+    out[y0:y1, x0:x1] = _photo_detail(diffuse[y0:y1, x0:x1], np.asarray(image, np.float32)[y0:y1, x0:x1],
+                                      bad[y0:y1, x0:x1], w)
+    return out
+
+
+def _photo_detail(diffuse, image, bad, w):
+    """:func:`photo_detail_under_highlight` on a window of the maps (``w``: the whole map's width)."""
+    d = cv.albedo_to_linear(diffuse)
     sigma = max(1.0, w / 64.0)
-    lum = luminance(cv.image_to_linear(np.asarray(image, np.float32)))
+    lum = luminance(cv.image_to_linear(image))
     ld = luminance(d)
     low_lum, low_d = blur(lum, sigma), blur(ld, sigma)
     # photo units -> albedo (the flash's shading and power), read where the highlight did not reach
@@ -523,7 +537,7 @@ def photo_detail_under_highlight(diffuse, image, hidden):
     factor = np.clip(factor, 1.0 / FILL_DETAIL_RANGE, FILL_DETAIL_RANGE).astype(np.float32)
     factor = _no_more_detail_than_around(factor, d, bad, w)
     out = cv.albedo_to_stored(np.clip(low * factor[..., None], 0.0, 1.0)).astype(np.float32)
-    return np.where(bad[..., None], out, np.asarray(diffuse, np.float32))
+    return np.where(bad[..., None], out, diffuse)
 
 
 def texture_beside(diffuse, spot):
