@@ -130,6 +130,25 @@ def measure(folder, image):
             "relief": float(widths.max() - widths.min()), "height_trend": height_trend(height, spot)}
 
 
+def paper_spot(path, image):
+    """{"paper_fine", "paper_bright"}: :func:`flash_hole` of the paper's own diffuse (``paper_diffuse.png``
+    beside a ``paper_real`` photo, the paper's network's output) in the same spot and ring as ours, at the
+    output size; {} for a photo without one. The spot and the ring hold different parts of many photos
+    (yellow grout in the ring, a pale band in the spot): a map without any flash hole measures what the
+    photo's content gives."""
+    from svbrdf_cli.imageio import read_image
+    from svbrdf_cli.imageops import resize
+
+    theirs = os.path.join(os.path.dirname(path), "paper_diffuse.png")
+    if not os.path.isfile(theirs):
+        return {}
+    side = image.shape[0]
+    diffuse = resize(read_image(theirs)[..., :3], side).reshape(side, side, 3)
+    spot, ring = spot_and_ring(image)
+    fine, bright = flash_hole(np.clip(diffuse, 0.0, 1.0), spot, ring)
+    return {"paper_fine": fine, "paper_bright": bright}
+
+
 def run(names=None, keep=None, log=print, model_name=None, refine=None):
     """Capture every photo (glTF preset, default options; ``model_name``: what ``--model`` takes, the
     default when None; ``refine``: ``--refine``'s steps, None for its default) and measure it; returns
@@ -156,6 +175,7 @@ def run(names=None, keep=None, log=print, model_name=None, refine=None):
             image = ingest.encode_for_network(resize(prepared.crop.image, side), np.float32(2.0 ** prepared.gain_ev),
                                               fast=True)
             row = measure(folder, image)
+            row.update(paper_spot(path, image))
             rows.append((name, row))
             log(f"{name:48s} " + " ".join(f"{k} {v:.3f}" for k, v in row.items()))
     finally:
@@ -167,12 +187,13 @@ def run(names=None, keep=None, log=print, model_name=None, refine=None):
 def table(rows):
     """Markdown table of :func:`run`'s rows, with the pass counts."""
     lines = ["| photo | kind | mean metallic | pixels > 0.5 | fine detail in spot / ring | brightness in spot / ring "
-             "| mean linear albedo | relief (widths) | height trend at flash |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "| the paper's diffuse: fine detail, brightness | mean linear albedo | relief (widths) | height trend at flash |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for name, r in rows:
         kind = "metal" if is_metallic(name) else "dielectric"
+        paper = f"{r['paper_fine']:.2f}, {r['paper_bright']:.2f}" if "paper_fine" in r else "–"
         lines.append(f"| {name} | {kind} | {r['metallic']:.3f} | {r['metal_px']:.3f} | {r['fine']:.2f} | "
-                     f"{r['bright']:.2f} | {r['albedo']:.3f} | {r['relief']:.4f} | {r['height_trend']:.2f} |")
+                     f"{r['bright']:.2f} | {paper} | {r['albedo']:.3f} | {r['relief']:.4f} | {r['height_trend']:.2f} |")
     diel = [r for n, r in rows if not is_metallic(n)]
     ok_metal = sum(r["metallic"] <= 0.02 for r in diel)
     ok_fine = sum(r["fine"] >= 0.5 for _, r in rows)
@@ -180,6 +201,12 @@ def table(rows):
     lines.append("")
     lines.append(f"Dielectrics with mean metallic <= 0.02: {ok_metal} of {len(diel)}; fine detail >= 0.5: "
                  f"{ok_fine} of {len(rows)}; brightness within 0.8-1.25: {ok_bright} of {len(rows)}.")
+    paper = [(n, r) for n, r in rows if "paper_fine" in r]
+    if paper:
+        ours = sum(r["fine"] >= 0.5 and 0.8 <= r["bright"] <= 1.25 for _, r in paper)
+        theirs = sum(r["paper_fine"] >= 0.5 and 0.8 <= r["paper_bright"] <= 1.25 for _, r in paper)
+        lines.append(f"Of the {len(paper)} photos with the paper's own diffuse, both spot measures within bounds: "
+                     f"ours {ours}, the paper's {theirs}.")
     return "\n".join(lines)
 
 
