@@ -99,7 +99,7 @@ MAX_MASK_SHARE = 0.5
 WHITE_CLIP = 0.6
 
 
-def fill_highlight(diffuse, image, highlight=None):
+def fill_highlight(diffuse, image, highlight=None, masks=None):
     """The stored ``diffuse`` filled from its surroundings where the highlight hid the albedo: where
     the encoded ``image`` is clipped (at its plateau, :func:`svbrdf_cli.conventions.clip_level`) and
     where the chain's own highlight mask ``highlight`` (``M_h``, encoded) is above
@@ -107,7 +107,8 @@ def fill_highlight(diffuse, image, highlight=None):
     detail (:func:`svbrdf_cli.infer.physical.relative_texture`) where the photo was not clipped (the
     chain saw the grout lines through the highlight, at a wrong level), and the texture just beside
     where it was, as the physical estimate fills its own (:func:`svbrdf_cli.infer.physical.texture_beside`):
-    moved from beside, the texture doubled a tiling's grout lines. Measured with the 1,235k chain and
+    moved from beside, the texture doubled a tiling's grout lines. ``masks``: :func:`hidden_by_highlight`'s,
+    if the caller has them. Measured with the 1,235k chain and
     the carried roughness (Des19 through capture, ``--refine 60``): diffuse 0.0365 -> 0.0364, relighting
     0.0580 -> 0.0579, the card 0.1262 -> 0.1261, the generated known-light captures 0.0734 -> 0.0731.
 
@@ -123,7 +124,7 @@ def fill_highlight(diffuse, image, highlight=None):
     from svbrdf_cli.imageops import fill_from_surroundings, luminance
     from svbrdf_cli.infer.physical import relative_texture, texture_beside
 
-    mask, clipped = hidden_by_highlight(image, highlight)
+    mask, clipped = masks if masks is not None else hidden_by_highlight(image, highlight)
     if not mask.any():
         return diffuse
     lin = cv.albedo_to_linear(diffuse)
@@ -392,8 +393,8 @@ class SwiftModel:
         did not clip (:func:`hidden_by_highlight`)."""
         out = self.network(image)
         t0 = time.perf_counter()
-        out["diffuse"] = fill_highlight(out["diffuse"], image, out["M_h"])
-        hidden, clipped = hidden_by_highlight(image, out["M_h"])
+        hidden, clipped = masks = hidden_by_highlight(image, out["M_h"])
+        out["diffuse"] = fill_highlight(out["diffuse"], image, masks=masks)
         out["hidden"] = hidden & ~clipped
         out.update(flatten_flash_trends(out, self.fit.rho, FLATTENED))
         out["roughness"] = roughness_from_observed(out["roughness"], out["diffuse"], out["M_h"])
