@@ -125,7 +125,9 @@ def test_refinement_fits_the_photo_better_and_relights_better():
     start = dict(truth, diffuse=(truth["diffuse"] * hole).astype(np.float32))
     geo = geometry.CaptureGeometry(camera=light, light=light, highlight=light[:2])
     res = refine.refine(photo, _stored(start), geo, 60)
-    assert res.report["photo_loss_after"] < 0.6 * res.report["photo_loss_before"]
+    # (0.64; 0.57 when the tilt could change broadly: the normals are flat, a broad tilt round the flash fitted
+    # the hole instead)
+    assert res.report["photo_loss_after"] < 0.7 * res.report["photo_loss_before"]
     assert not res.report["kept_start"] and res.report["iterations"] == 60
 
     def diffuse_error(stored):  # the albedo's texture, whatever its level (the intensity is fitted)
@@ -481,3 +483,30 @@ def test_refinement_draws_no_cross_through_the_highlight():
     across = np.abs(np.diff(change[..., 0].mean(0))).max()  # tilt x, column to column
     down = np.abs(np.diff(change[..., 1].mean(1))).max()  # tilt y, row to row
     assert across < 0.002 and down < 0.002, (across, down)  # (per pixel: 0.0040 and 0.0023)
+
+
+def test_a_highlight_the_lobe_cannot_make_draws_no_disc_of_tilt_and_fine_relief_still_shows():
+    # the photo's highlight is broader than the start's lobe (roughness 0.45 against 0.25): tilting the
+    # normals round the flash would reshape it, and drew a disc of tilted quadrants on a flat leather
+    size, light = 256, (0.05, 0.1, 2.4)
+    rng = np.random.default_rng(11)
+    fine = np.stack([cv2.GaussianBlur(rng.normal(0, 1, (size, size)).astype(np.float32), (0, 0), 1.5)
+                     for _ in range(2)], -1)
+    fine *= 0.08 / fine.std()
+    n = shading.tilt_to_normal(fine).astype(np.float32)
+    d = np.full((size, size, 3), 0.3, np.float32)
+    s = np.full((size, size, 3), 0.04, np.float32)
+    lin = shading.render(n, d, np.full((size, size, 1), 0.45, np.float32), s, light=light, camera=light,
+                         intensity=cv.FLASH_INTENSITY) * 0.5
+    photo = cv.image_to_encoded(lin).astype(np.float32)
+    flat = np.dstack([np.zeros((size, size, 2)), np.ones((size, size, 1))]).astype(np.float32)
+    start = {"normal": flat, "diffuse": d, "roughness": np.full((size, size, 1), 0.25, np.float32), "specular": s}
+    geo = geometry.CaptureGeometry(camera=light, light=light, highlight=light[:2])
+    res = refine.refine(photo, _stored(start), geo, 30)
+    tilt = refine.parameters(res.stored)["tilt"]
+    broad = cv2.GaussianBlur(tilt, (0, 0), size / 16)
+    assert np.sqrt((broad ** 2).mean()) < 1.5e-4, np.sqrt((broad ** 2).mean())  # (0.6e-4; broad changes allowed: 3.4e-4)
+    p = cv.surface_positions(size, size)
+    near = np.hypot(p[..., 0] - light[0], p[..., 1] - light[1]) < 0.6  # where the highlight shows relief
+    a, b = tilt[near].ravel(), fine[near].ravel()
+    assert np.corrcoef(a, b)[0, 1] > 0.2, np.corrcoef(a, b)[0, 1]  # (0.25; broad changes allowed: 0.27)
