@@ -34,17 +34,11 @@ LEARNING_RATE = 0.05
 
 
 def soft_classes(diffuse_lin, k):
-    """(H*W, k) soft assignment of each pixel to ``k`` k-means classes of its log colour (float32)."""
-    import cv2
+    """(H*W, k) soft classes of the diffuse's colour (float32): the runtime's
+    (:func:`svbrdf_cli.infer.swift.soft_classes`), on every pixel with 3 restarts."""
+    from svbrdf_cli.infer.swift import soft_classes as classes
 
-    f = np.log(np.maximum(diffuse_lin, 1e-3)).reshape(-1, 3).astype(np.float32)
-    f = (f - f.mean(0)) / (float(f.std()) + 1e-6)
-    cv2.setRNGSeed(0)
-    crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 1e-3)
-    _, _, centres = cv2.kmeans(f, k, None, crit, 3, cv2.KMEANS_PP_CENTERS)
-    d2 = ((f[:, None, :] - centres[None]) ** 2).sum(-1)
-    p = np.exp(-(d2 - d2.min(1, keepdims=True)) / max(float(np.median(np.sort(d2, 1)[:, 1])), 1e-4))
-    return (p / p.sum(1, keepdims=True)).astype(np.float32)
+    return classes(diffuse_lin, k, every=1, attempts=3).astype(np.float32)
 
 
 def refit(nine, lin, classes, photos):
