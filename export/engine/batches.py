@@ -3,7 +3,8 @@
 Every step draws ``B`` bank materials and for each: a random window (zoom, any rotation, a mirror;
 normals turned with the pixels), a deeper or shallower relief, a glossier roughness, a tint and
 brightness change of the diffuse, then a photograph under a sampled camera and flash with the simulator's exposure, white balance, vignetting, blur,
-noise, tone curve and JPEG (:mod:`export.data.simulate`). Only what the stage being trained needs
+noise, tone curve and JPEG (:mod:`export.data.simulate`), exposed as ``svbrdf capture`` exposes a photo
+(:func:`as_the_runtime_exposes`). Only what the stage being trained needs
 is rendered:
 
 * ``masks``: ``M_b`` and ``M_h`` (paper Eqs. 10-11, :mod:`export.render.targets`);
@@ -157,6 +158,33 @@ def photograph(maps, capture, g, cap=True):
     return {"photo": photo, "linear": linear, "intensity": intensity}
 
 
+#: The encoded mean the runtime exposes every photo to before the networks see it
+#: (:func:`svbrdf_cli.infer.exposure.auto_exposure_gain`), and the stops its search may move it.
+RUNTIME_MEAN = cv.AUTO_EXPOSURE_MEAN
+RUNTIME_LIMIT = 12.0
+
+
+def as_the_runtime_exposes(shot, iterations=30):
+    """``shot`` (:func:`photograph`'s) exposed as ``svbrdf capture`` exposes a photo before the networks
+    see it: the encoded photo read back as linear (gamma 2.2), times the gain that brings its encoded mean
+    to :data:`RUNTIME_MEAN` (a bisection in stops, as the runtime's), clipped and encoded again. A photo
+    the camera clipped and the runtime then darkens holds its clipped highlight as a grey plateau, which a
+    photo fed as shot never shows. The clean ``linear`` image and the ``intensity`` take the same gain, so
+    every target rendered from them (and the maps' flash level) reads the photo the networks see."""
+    lin = cv.image_to_linear(shot["photo"])
+    sub = lin[..., ::2, ::2]
+    lo = torch.full((lin.shape[0],), -RUNTIME_LIMIT, dtype=lin.dtype)
+    hi = torch.full_like(lo, RUNTIME_LIMIT)
+    for _ in range(iterations):
+        mid = (lo + hi) / 2
+        dark = cv.image_to_encoded(sub * (2.0 ** mid).reshape(-1, 1, 1, 1)).mean((1, 2, 3)) < RUNTIME_MEAN
+        lo, hi = torch.where(dark, mid, lo), torch.where(dark, hi, mid)
+    gain = 2.0 ** ((lo + hi) / 2)
+    return {"photo": cv.image_to_encoded(lin * gain.reshape(-1, 1, 1, 1)),
+            "linear": shot["linear"] * gain.to(shot["linear"]).reshape(-1, 1, 1, 1),
+            "intensity": shot["intensity"] * gain.to(shot["intensity"])}
+
+
 def _light_disc(camera, count, like):
     disc = torch.as_tensor(cv.aux_light_positions(count, height=0.0), dtype=like.dtype)
     cam = camera.to(like).reshape(-1, 1, 3)
@@ -248,7 +276,7 @@ def make(bank, g, batch, size=128, stage="maps", index=None, specular_level="abs
     maps = materials(bank, g, batch, size, index)
     capture = simulate.sample_capture(g, batch)
     capture = {k: v.float() for k, v in capture.items()}
-    shot = photograph(maps, capture, g)
+    shot = as_the_runtime_exposes(photograph(maps, capture, g))
     cam, light, intensity = capture["camera"], capture["light"], shot["intensity"]
     seen = estimated_flash(light, g)
     out = {"photo": shot["photo"], "intensity": intensity, "camera": cam, "light": light,

@@ -140,7 +140,8 @@ def test_a_batch_has_what_each_stage_needs(small_bank):
         for k in names:
             assert b[k].shape == (3, 3, 64, 64) and torch.isfinite(b[k]).all(), k
     assert set(cv.MAP_NAMES) <= set(b)
-    assert 0.05 < float(b["photo"].mean()) < 0.95
+    # every photo as the runtime feeds the networks: exposed to its encoded mean
+    assert (b["photo"].mean((1, 2, 3)) - cv.AUTO_EXPOSURE_MEAN).abs().max() < 0.02
 
 
 def test_relief_scale_keeps_the_direction_and_changes_the_depth(small_bank):
@@ -205,6 +206,31 @@ def test_a_fixed_power_photo_that_would_clip_is_exposed_down_and_one_that_would_
         shot = batches.photograph(maps, c, torch.Generator().manual_seed(1))
         want = cap_at if capped else cap_at * scale
         assert torch.allclose(shot["intensity"], want, rtol=1e-4), (scale, shot["intensity"], want)
+
+
+def test_a_batch_photo_is_exposed_as_the_runtime_exposes_it_a_clipped_highlight_grey(small_bank):
+    from svbrdf_cli.infer.exposure import auto_exposure_gain
+
+    bank = bank_mod.Bank(small_bank)
+    g = torch.Generator().manual_seed(5)
+    maps = batches.materials(bank, g, 4, 64)
+    cap = {k: v.float() for k, v in batches.simulate.sample_capture(g, 4).items()}
+    unit = render_maps(maps, light=cap["light"], camera=cap["camera"], intensity=1.0)
+    cap["power"] = batches.highlight_cap(unit[..., ::4, ::4]) * 4.0  # bright: clipped, and mean above the runtime's
+    shot = batches.photograph(maps, cap, torch.Generator().manual_seed(1), cap=False)
+    seen = batches.as_the_runtime_exposes(shot)
+    for i in range(4):
+        want = auto_exposure_gain(cv.image_to_linear(shot["photo"][i].permute(1, 2, 0).numpy()))
+        got = float(torch.log2(seen["intensity"][i] / shot["intensity"][i]))
+        assert abs(got - want) < 0.05, (i, got, want)
+        assert abs(float(seen["photo"][i].mean()) - cv.AUTO_EXPOSURE_MEAN) < 0.01
+        clipped = shot["photo"][i].amax(0) >= 1.0
+        assert clipped.float().mean() > 0.003  # the camera clipped it
+        top = float(seen["photo"][i].amax(0)[clipped].min())
+        assert top < 0.97 and float(seen["photo"][i].amax(0)[clipped].max()) == pytest.approx(top, abs=1e-5)
+    assert torch.allclose(seen["linear"] / shot["linear"].clamp_min(1e-12),
+                          (seen["intensity"] / shot["intensity"]).reshape(-1, 1, 1, 1).expand_as(shot["linear"]),
+                          rtol=1e-4)
 
 
 def test_flash_context_and_base_agree_with_numpy():
