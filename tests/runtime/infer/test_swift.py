@@ -297,5 +297,10 @@ def test_where_the_chain_guessed_a_metal_its_maps_are_read_as_a_dielectrics():
     got = cv.albedo_to_linear(out["specular"][:, 4:])
     np.testing.assert_allclose(luminance(got), cv.DIELECTRIC_MAX_F0, rtol=1e-4)
     np.testing.assert_allclose(got / got[..., :1], f0[:, 4:] / f0[:, 4:, :1], rtol=1e-4)  # the hue kept
-    np.testing.assert_allclose(out["diffuse"][:, 4:], 0.5, atol=1e-6)  # the photo's light, not black
+    # the photo's light, not black, at the chain's level (the dielectric half's 0.3), not the estimate's own
+    np.testing.assert_allclose(cv.albedo_to_linear(out["diffuse"][:, 4:]), 0.3, rtol=1e-4)
     assert read_as_dielectric({k: v[:, :4] for k, v in stored.items()}, estimate) == {}
+    # a map read as a metal nearly everywhere has too little of the chain's level: the estimate's own
+    gold = np.broadcast_to(np.float32([0.6, 0.45, 0.2]), f0.shape)
+    allmetal = {"diffuse": stored["diffuse"], "specular": cv.albedo_to_stored(gold).astype(np.float32)}
+    np.testing.assert_allclose(read_as_dielectric(allmetal, estimate)["diffuse"], 0.5, atol=1e-6)
