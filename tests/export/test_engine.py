@@ -192,13 +192,19 @@ def test_fast_highlight_removed_matches_the_reference(small_bank):
     assert float((fast[0] - cv.image_to_encoded(shot["linear"])).abs().mean()) > 0.005
 
 
-def test_a_fixed_power_photo_that_would_clip_is_exposed_down_and_one_that_would_not_keeps_its_power(small_bank):
+def _four_captures(small_bank):
+    """Four bank materials, their sampled captures, and the flash power at which each clips the most
+    a fixed power may (:func:`export.engine.batches.highlight_cap`)."""
     bank = bank_mod.Bank(small_bank)
     g = torch.Generator().manual_seed(5)
     maps = batches.materials(bank, g, 4, 64)
     cap = {k: v.float() for k, v in batches.simulate.sample_capture(g, 4).items()}
     unit = render_maps(maps, light=cap["light"], camera=cap["camera"], intensity=1.0)
-    cap_at = batches.highlight_cap(unit[..., ::4, ::4])
+    return maps, cap, unit, batches.highlight_cap(unit[..., ::4, ::4])
+
+
+def test_a_fixed_power_photo_that_would_clip_is_exposed_down_and_one_that_would_not_keeps_its_power(small_bank):
+    maps, cap, unit, cap_at = _four_captures(small_bank)
     clipped = ((unit[..., ::4, ::4] * cap_at.reshape(-1, 1, 1, 1)).amax(1) >= 1.0).float().mean((1, 2))
     assert (clipped <= batches.MAX_CLIPPED_SHARE + 0.02).all()
     for scale, capped in ((20.0, True), (0.05, False)):  # far above the cap; far below it
@@ -211,12 +217,8 @@ def test_a_fixed_power_photo_that_would_clip_is_exposed_down_and_one_that_would_
 def test_a_batch_photo_is_exposed_as_the_runtime_exposes_it_a_clipped_highlight_grey(small_bank):
     from svbrdf_cli.infer.exposure import auto_exposure_gain
 
-    bank = bank_mod.Bank(small_bank)
-    g = torch.Generator().manual_seed(5)
-    maps = batches.materials(bank, g, 4, 64)
-    cap = {k: v.float() for k, v in batches.simulate.sample_capture(g, 4).items()}
-    unit = render_maps(maps, light=cap["light"], camera=cap["camera"], intensity=1.0)
-    cap["power"] = batches.highlight_cap(unit[..., ::4, ::4]) * 4.0  # bright: clipped, and mean above the runtime's
+    maps, cap, _, cap_at = _four_captures(small_bank)
+    cap["power"] = cap_at * 4.0  # bright: clipped, and mean above the runtime's
     shot = batches.photograph(maps, cap, torch.Generator().manual_seed(1), cap=False)
     seen = batches.as_the_runtime_exposes(shot)
     for i in range(4):
