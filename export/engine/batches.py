@@ -158,29 +158,31 @@ def photograph(maps, capture, g, cap=True):
     return {"photo": photo, "linear": linear, "intensity": intensity}
 
 
-#: The encoded mean the runtime exposes every photo to before the networks see it
-#: (:func:`svbrdf_cli.infer.exposure.auto_exposure_gain`), and the stops its search may move it.
-RUNTIME_MEAN = cv.AUTO_EXPOSURE_MEAN
-RUNTIME_LIMIT = 12.0
+def runtime_gain(photo, iterations=30):
+    """(B,) the gain ``svbrdf capture``'s auto exposure gives each encoded (B, 3, H, W) ``photo``
+    (:func:`svbrdf_cli.infer.exposure.auto_exposure_gain`, batched in torch): the bisection in stops, within
+    :data:`svbrdf_cli.ingest.plausible.EXPOSURE_LIMIT`, that brings the encoded mean of the photo read back
+    as linear (gamma 2.2) to :data:`svbrdf_cli.conventions.AUTO_EXPOSURE_MEAN`, on every other pixel."""
+    from svbrdf_cli.ingest.plausible import EXPOSURE_LIMIT
 
-
-def as_the_runtime_exposes(shot, iterations=30):
-    """``shot`` (:func:`photograph`'s) exposed as ``svbrdf capture`` exposes a photo before the networks
-    see it: the encoded photo read back as linear (gamma 2.2), times the gain that brings its encoded mean
-    to :data:`RUNTIME_MEAN` (a bisection in stops, as the runtime's), clipped and encoded again. A photo
-    the camera clipped and the runtime then darkens holds its clipped highlight as a grey plateau, which a
-    photo fed as shot never shows. The clean ``linear`` image and the ``intensity`` take the same gain, so
-    every target rendered from them (and the maps' flash level) reads the photo the networks see."""
-    lin = cv.image_to_linear(shot["photo"])
-    sub = lin[..., ::2, ::2]
-    lo = torch.full((lin.shape[0],), -RUNTIME_LIMIT, dtype=lin.dtype)
-    hi = torch.full_like(lo, RUNTIME_LIMIT)
+    sub = cv.image_to_linear(photo)[..., ::2, ::2]
+    lo = torch.full((photo.shape[0],), -EXPOSURE_LIMIT, dtype=photo.dtype)
+    hi = torch.full_like(lo, EXPOSURE_LIMIT)
     for _ in range(iterations):
         mid = (lo + hi) / 2
-        dark = cv.image_to_encoded(sub * (2.0 ** mid).reshape(-1, 1, 1, 1)).mean((1, 2, 3)) < RUNTIME_MEAN
+        dark = cv.image_to_encoded(sub * (2.0 ** mid).reshape(-1, 1, 1, 1)).mean((1, 2, 3)) < cv.AUTO_EXPOSURE_MEAN
         lo, hi = torch.where(dark, mid, lo), torch.where(dark, hi, mid)
-    gain = 2.0 ** ((lo + hi) / 2)
-    return {"photo": cv.image_to_encoded(lin * gain.reshape(-1, 1, 1, 1)),
+    return 2.0 ** ((lo + hi) / 2)
+
+
+def as_the_runtime_exposes(shot):
+    """``shot`` (:func:`photograph`'s) exposed as ``svbrdf capture`` exposes a photo before the networks
+    see it: the encoded photo read back as linear, times :func:`runtime_gain`, clipped and encoded again. A
+    photo the camera clipped and the runtime then darkens holds its clipped highlight as a grey plateau,
+    which a photo fed as shot never shows. The clean ``linear`` image and the ``intensity`` take the same
+    gain, so every target rendered from them (and the maps' flash level) reads the photo the networks see."""
+    gain = runtime_gain(shot["photo"])
+    return {"photo": cv.image_to_encoded(cv.image_to_linear(shot["photo"]) * gain.reshape(-1, 1, 1, 1)),
             "linear": shot["linear"] * gain.to(shot["linear"]).reshape(-1, 1, 1, 1),
             "intensity": shot["intensity"] * gain.to(shot["intensity"])}
 

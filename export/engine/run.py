@@ -762,21 +762,20 @@ def score_known_lights(net, caps, size, refine_steps=DEFAULT_ITERATIONS):
 def score_des19(net, des19, size=None):
     """The reference scorer's numbers (8-bit maps, linear albedo, adapted roughness) for the chain,
     run at ``size`` (:func:`predict`) on each input exposed as the runtime exposes it
-    (:func:`export.engine.batches.as_the_runtime_exposes`, as the chain is trained), its diffuse then brought
+    (:func:`export.engine.batches.runtime_gain`, as the chain is trained), its diffuse then brought
     back to the input's own level (times the inverse gain: ``svbrdf capture``'s ``photo_level``)."""
-    from export.engine.batches import as_the_runtime_exposes
+    from export.engine.batches import runtime_gain
 
     rows = {k: [] for k in ("normal", "diffuse", "roughness", "specular", "relief")}
     for name, photo, gt in des19:
         cam, light = des19_geometry(1)
-        one = torch.ones(photo.shape[0], dtype=photo.dtype)
-        seen = as_the_runtime_exposes({"photo": photo, "linear": photo, "intensity": one})
-        pred = predict(net, seen["photo"], cam, light, size)
+        gain = runtime_gain(photo)
+        pred = predict(net, cv.image_to_encoded(cv.image_to_linear(photo) * gain.reshape(-1, 1, 1, 1)), cam, light, size)
         p = {k: (v[0].permute(1, 2, 0).numpy().astype(np.float64) * 255).round() / 255 for k, v in pred.items()}
         p["roughness"] = np.repeat(p["roughness"], 3, -1)
         for k in ("diffuse", "specular"):
             p[k] = p[k] ** cv.ALBEDO_GAMMA
-        p["diffuse"] = np.clip(p["diffuse"] / float(seen["intensity"][0]), 0.0, 1.0)
+        p["diffuse"] = np.clip(p["diffuse"] / float(gain[0]), 0.0, 1.0)
         for k in ("normal", "diffuse", "specular"):
             rows[k].append(np.sqrt(((p[k] - gt[k]) ** 2).mean()))
         rows["relief"].append(relief(p["normal"], gt["normal"]))
