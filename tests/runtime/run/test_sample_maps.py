@@ -1,11 +1,11 @@
-"""The bundled sample's texture set stays what it was, bit for bit, through the capture's input and
-output (OpenCV's JPEG decoder and PNG encoder, the native set written from the stored maps, in-place
-upsampling): ``svbrdf capture examples/glazed_tiles.jpg`` with default options (the trained chain ``swift``,
-``--refine``'s default steps) writes the image files whose SHA-256 ``python tests/checksums.py record``
-keeps in ``tests/data/checksums.json``. A change that alters the maps on purpose re-records them."""
+"""The bundled sample's texture set stays what it was, within rounding, through the capture's input
+and output (OpenCV's JPEG decoder and PNG encoder, the native set written from the stored maps, in-place
+upsampling): ``svbrdf capture examples/glazed_tiles.jpg`` with default options (the trained chain
+``swift``, ``--refine``'s default steps) writes maps whose 4x4 block sums ``python tests/checksums.py
+record-sample`` keeps in ``tests/data/sample_maps.npz``. Within rounding, not bit for bit: onnxruntime
+and OpenBLAS choose their kernels by the CPU's instruction set, which moves the maps' last bits; one
+refinement step fewer moves them beyond it. A change that alters the maps on purpose re-records them."""
 
-import hashlib
-import json
 import os
 
 import numpy as np
@@ -14,27 +14,45 @@ import pytest
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.imageio import read_image
 
-from tests.checksums import IMAGES, RECORD
+from tests.checksums import IMAGES, beyond_rounding, sample_differences
 from tests.runtime.cli.clitools import SAMPLE, run
 
+NAME = os.path.splitext(os.path.basename(SAMPLE))[0]
 
-def _sums(folder):
-    """sha256 of every image file under ``folder``, by relative path (as ``tests/checksums.py`` takes them)."""
-    return {f.relative_to(folder).as_posix(): hashlib.sha256(f.read_bytes()).hexdigest()
-            for f in sorted(folder.rglob("*")) if f.is_file() and f.suffix.lower() in IMAGES}
+
+def _capture(folder, *options):
+    """The folder of the set ``svbrdf capture SAMPLE -o folder -q *options`` writes."""
+    code, out = run("capture", SAMPLE, "-o", folder, "-q", *options)
+    assert code == 0, out
+    return folder / NAME
+
+
+@pytest.fixture(scope="module")
+def sample_sets(tmp_path_factory):
+    """{preview: the sample's set}, captured with default options and with ``--no-preview``."""
+    return {p: _capture(tmp_path_factory.mktemp("preview" if p else "no-preview"), *([] if p else ["--no-preview"]))
+            for p in (True, False)}
 
 
 @pytest.mark.parametrize("preview", [True, False])
-def test_sample_set_is_the_recorded_one_bit_for_bit(tmp_path, preview):
-    code, out = run("capture", SAMPLE, "-o", tmp_path, "-q", *([] if preview else ["--no-preview"]))
-    assert code == 0, out
-    want = json.loads(RECORD.read_text())["glazed_tiles"]
-    if not preview:  # the preview is written beside the maps and changes none of them
-        want = {k: v for k, v in want.items() if os.path.basename(k) != "preview.png"}
-    got = _sums(tmp_path)
-    assert got == want, sorted(k for k in set(got) | set(want) if got.get(k) != want.get(k))
-    assert sorted(os.path.basename(k) for k in got) == sorted([f"{m}.png" for m in cv.MAP_NAMES]
-                                                              + (["preview.png"] if preview else []))
+def test_sample_set_is_the_recorded_one_within_rounding(sample_sets, preview):
+    folder = sample_sets[preview]
+    differences = sample_differences(folder)
+    assert not beyond_rounding(differences), differences
+    got = [f.name for f in folder.parent.rglob("*") if f.is_file() and f.suffix.lower() in IMAGES]
+    assert sorted(got) == sorted([f"{m}.png" for m in cv.MAP_NAMES] + (["preview.png"] if preview else []))
+
+
+def test_the_preview_changes_none_of_the_maps(sample_sets):
+    for m in cv.MAP_NAMES:
+        assert (sample_sets[True] / f"{m}.png").read_bytes() == (sample_sets[False] / f"{m}.png").read_bytes(), m
+
+
+def test_one_refinement_step_fewer_is_beyond_rounding(tmp_path):
+    """``--refine 29``, one step short of the default 30, moves the maps by 0.03-0.38 levels per pixel
+    on average (0.03 the normal, 0.38 the roughness): the comparison sees it."""
+    differences = sample_differences(_capture(tmp_path, "--refine", "29", "--no-preview"))
+    assert beyond_rounding(differences), differences
 
 
 @pytest.mark.parametrize("isal", [True, False])
