@@ -193,3 +193,19 @@ def rings(rho, count):
     """
     edges = np.linspace(0.0, float(rho.max()) + 1e-6, count + 1)
     return np.clip(np.digitize(rho.ravel(), edges) - 1, 0, count - 1), 0.5 * (edges[:-1] + edges[1:])
+
+
+def soft_classes(diffuse_lin, k, every=7, attempts=2):
+    """(H*W, k) soft assignment of each pixel of the linear ``diffuse_lin`` to ``k`` classes of its log
+    colour: k-means (on every ``every``-th pixel, ``attempts`` restarts, seeded), each pixel weighted by
+    its squared distances to the centres over the median distance to the second nearest."""
+    import cv2
+
+    f = np.log(np.maximum(diffuse_lin, 1e-3)).reshape(-1, 3).astype(np.float32)
+    f = (f - f.mean(0)) / (float(f.std()) + 1e-6)
+    crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 1e-3)
+    cv2.setRNGSeed(0)
+    _, _, centres = cv2.kmeans(f[::every], k, None, crit, attempts, cv2.KMEANS_PP_CENTERS)
+    d2 = ((f[:, None, :] - centres[None]) ** 2).sum(-1)
+    p = np.exp(-(d2 - d2.min(1, keepdims=True)) / max(float(np.median(np.sort(d2, 1)[:, 1])), 1e-4))
+    return p / p.sum(1, keepdims=True)

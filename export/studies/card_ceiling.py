@@ -35,8 +35,8 @@ LEARNING_RATE = 0.05
 
 def soft_classes(diffuse_lin, k):
     """(H*W, k) soft classes of the diffuse's colour (float32): the runtime's
-    (:func:`svbrdf_cli.infer.swift.soft_classes`), on every pixel with 3 restarts."""
-    from svbrdf_cli.infer.swift import soft_classes as classes
+    (:func:`svbrdf_cli.imageops.soft_classes`), on every pixel with 3 restarts."""
+    from svbrdf_cli.imageops import soft_classes as classes
 
     return classes(diffuse_lin, k, every=1, attempts=3).astype(np.float32)
 

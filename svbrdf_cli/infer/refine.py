@@ -138,6 +138,22 @@ RADIAL_RINGS = 16
 #: lens's vignetting, which the synthetic sets do not have.
 RADIAL_FREE = ("diffuse", "roughness", "specular")
 TILT_LIMIT = 3.0  # 72 degrees
+#: The roughness's change is one value per soft albedo class of the start's diffuse
+#: (:func:`svbrdf_cli.imageops.soft_classes`), projected after each step (:func:`_per_class`), each class's
+#: value read where the specular lobe makes the light (:func:`_lobe_share`). With a change per pixel, the
+#: fit painted a clipped highlight's rim into the roughness: a ring of glossy and rough blotches round the
+#: flash on a red lacquer, a blotch at the flash on a green leather and on the bundled tiles. A material's
+#: roughness follows its albedo's classes (a tile and its grout, a wood and its varnish), not the flash.
+ROUGHNESS_CLASSES = 4
+#: The soft classes' memberships are raised to this power (and normalised again): a pixel of one colour
+#: belongs to its own class, not a quarter to each of the others (:func:`svbrdf_cli.imageops.soft_classes`
+#: gives a grey pixel next to a blue region 0.29 of the blue's classes), so a class the highlight never
+#: reached does not take the change seen under it; a pixel between two colours still shares them.
+CLASS_SHARPNESS = 4
+#: A class's value is its lobe-weighted mean change shrunk towards none by this share of the image's pixels
+#: added to its lobe's weight: a class the lobe shows over a few pixels only (or through the last of its
+#: membership) keeps about no change, one it shows over 1 % of the image keeps 0.9 of its mean.
+CLASS_EVIDENCE = 0.001
 #: The tilt's change keeps only its detail finer than this (a Gaussian's sigma, a share of the side), after
 #: each step (:func:`_only_fine`). A highlight whose shape the smooth lobe does not make (taller than wide,
 #: broader, a little off) was explained by tilting the normals round the flash: on a scratched leather
@@ -159,8 +175,9 @@ TILT_DETAIL = 0.03
 #: F0 showed a dark disc at the clipped highlight inside a ring that had moved (:func:`_fill_unobserved`).
 #: The parameters :func:`_fill_unobserved` fills. The tilt too: held at the start's inside the clipped
 #: region while the fit tilted the normals round it, it drew the region's ragged outline into every
-#: relit render of the highlight.
-FILLED = ("tilt", "diffuse", "roughness", "specular")
+#: relit render of the highlight. Not the roughness: its change is its albedo class's
+#: (:data:`ROUGHNESS_CLASSES`), which the clipped pixels share with the rest of their class.
+FILLED = ("tilt", "diffuse", "specular")
 
 
 @dataclasses.dataclass
@@ -382,6 +399,36 @@ def _only_fine(change):
     return (change - low).astype(np.float32)
 
 
+def _lobe_share(p, lighting, weight):
+    """(H, W) share of each pixel's rendered light that is the specular lobe's, at the maps ``p`` (0 where the
+    photo ``weight`` is 0: clipped): where the photo tells the roughness."""
+    total, _ = shading.render_with_gradient(*_maps(p), lighting)
+    t, d, r, s = _maps(p)
+    lobe, _ = shading.render_with_gradient(t, np.zeros_like(d), r, s, lighting)
+    share = luminance(lobe) / np.maximum(luminance(total), 1e-6)
+    return (np.clip(share, 0.0, 1.0) * weight[..., 0]).astype(np.float32)
+
+
+def _class_basis(diffuse_log, share):
+    """(soft classes (H*W, k), each pixel's weight in its classes' values (H*W, k): its lobe ``share`` times its
+    membership, over the class's sum of those plus :data:`CLASS_EVIDENCE`) for :func:`_per_class`, made once
+    per level."""
+    classes = imageops.soft_classes(np.exp(diffuse_log), ROUGHNESS_CLASSES) ** CLASS_SHARPNESS
+    classes = (classes / classes.sum(1, keepdims=True)).astype(np.float32)
+    seen = share.reshape(-1, 1) * classes
+    read = seen / (seen.sum(0) + CLASS_EVIDENCE * share.size)
+    return classes, read.astype(np.float32)
+
+
+def _per_class(change, basis):
+    """The roughness's ``change`` (H, W, 1) as one value per albedo class (soft): each class's value the
+    mean of the change where the lobe makes the light (``basis``: :func:`_class_basis`); a class the lobe
+    barely reaches keeps about none."""
+    classes, read = basis
+    values = read.T @ change.reshape(-1)
+    return (classes @ values).reshape(change.shape).astype(np.float32)
+
+
 def parameters(stored):
     """Stored maps -> optimisation parameters."""
     lin = cv.decode_maps(stored)
@@ -480,6 +527,7 @@ def refine(image, stored, geometry, iterations=DEFAULT_ITERATIONS, priors=None, 
         own_s = _at(own, s)[..., 0]
         radial = _radial(s, geometry.highlight[:2])
         weights = {k: _radial_weight(k, init) for k in RADIAL_FREE}
+        basis = _class_basis(init["diffuse"], _lobe_share(init, prob.lighting, prob.weight))
         m1 = {k: np.zeros_like(v) for k, v in delta.items()}
         m2 = {k: np.zeros_like(v) for k, v in delta.items()}
         for i in range(1, steps + 1):
@@ -505,6 +553,7 @@ def refine(image, stored, geometry, iterations=DEFAULT_ITERATIONS, priors=None, 
                                              luminance(init["specular"] + delta["specular"]), own_s)
             for k in RADIAL_FREE:
                 delta[k] = _without_radial_trend(delta[k], radial, weights[k])
+            delta["roughness"] = _per_class(delta["roughness"], basis)
             delta["tilt"] = _only_fine(_without_radial_tilt(delta["tilt"], radial, geometry.highlight[:2]))
             done += 1
             if progress:

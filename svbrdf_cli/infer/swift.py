@@ -32,6 +32,7 @@ import time
 import numpy as np
 
 from svbrdf_cli import conventions as cv
+from svbrdf_cli import imageops
 from svbrdf_cli.imageops import shrink_longest
 from svbrdf_cli.infer import flash_fields, tta
 from svbrdf_cli.infer.chain import SWIFT_FILE as FILE
@@ -204,22 +205,6 @@ def observed_share(highlight):
     return cv2.GaussianBlur(np.clip(h / (0.5 * peak), 0.0, 1.0), (0, 0), 0.04 * h.shape[1])
 
 
-def soft_classes(diffuse_lin, k, every=7, attempts=2):
-    """(H*W, k) soft assignment of each pixel of the linear ``diffuse_lin`` to ``k`` classes of its log
-    colour: k-means (on every ``every``-th pixel, ``attempts`` restarts, seeded), each pixel weighted by
-    its squared distances to the centres over the median distance to the second nearest."""
-    import cv2
-
-    f = np.log(np.maximum(diffuse_lin, 1e-3)).reshape(-1, 3).astype(np.float32)
-    f = (f - f.mean(0)) / (float(f.std()) + 1e-6)
-    crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 1e-3)
-    cv2.setRNGSeed(0)
-    _, _, centres = cv2.kmeans(f[::every], k, None, crit, attempts, cv2.KMEANS_PP_CENTERS)
-    d2 = ((f[:, None, :] - centres[None]) ** 2).sum(-1)
-    p = np.exp(-(d2 - d2.min(1, keepdims=True)) / max(float(np.median(np.sort(d2, 1)[:, 1])), 1e-4))
-    return p / p.sum(1, keepdims=True)
-
-
 def roughness_from_observed(roughness, diffuse, highlight):
     """The chain's stored ``roughness`` with its level set, away from the highlight, from where the
     highlight showed: per albedo class of the ``diffuse`` (k-means of its log colour, soft), the mean
@@ -237,7 +222,7 @@ def roughness_from_observed(roughness, diffuse, highlight):
     if o is None:
         return roughness
     r = np.asarray(roughness, np.float32)[..., 0]
-    p = soft_classes(cv.albedo_to_linear(diffuse), ROUGHNESS_CLASSES)
+    p = imageops.soft_classes(cv.albedo_to_linear(diffuse), ROUGHNESS_CLASSES)
     seen = o.ravel()[:, None] * p
     mass = seen.sum(0)
     overall = float((o * r).sum() / max(float(o.sum()), 1e-6))

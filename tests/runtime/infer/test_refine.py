@@ -125,9 +125,9 @@ def test_refinement_fits_the_photo_better_and_relights_better():
     start = dict(truth, diffuse=(truth["diffuse"] * hole).astype(np.float32))
     geo = geometry.CaptureGeometry(camera=light, light=light, highlight=light[:2])
     res = refine.refine(photo, _stored(start), geo, 60)
-    # (0.64; 0.57 when the tilt could change broadly: the normals are flat, a broad tilt round the flash fitted
-    # the hole instead)
-    assert res.report["photo_loss_after"] < 0.7 * res.report["photo_loss_before"]
+    # (0.71; 0.64 with a roughness change per pixel instead of per albedo class, 0.57 when the tilt could
+    # change broadly: the normals are flat, a broad tilt round the flash fitted the hole instead)
+    assert res.report["photo_loss_after"] < 0.75 * res.report["photo_loss_before"]
     assert not res.report["kept_start"] and res.report["iterations"] == 60
 
     def diffuse_error(stored):  # the albedo's texture, whatever its level (the intensity is fitted)
@@ -510,3 +510,29 @@ def test_a_highlight_the_lobe_cannot_make_draws_no_disc_of_tilt_and_fine_relief_
     near = np.hypot(p[..., 0] - light[0], p[..., 1] - light[1]) < 0.6  # where the highlight shows relief
     a, b = tilt[near].ravel(), fine[near].ravel()
     assert np.corrcoef(a, b)[0, 1] > 0.2, np.corrcoef(a, b)[0, 1]  # (0.25; broad changes allowed: 0.27)
+
+
+def test_a_uniform_roughness_stays_uniform():
+    # one material under a textured diffuse: the fit may move its roughness, not paint the highlight's
+    # shape into it (a spread of 0.0054 per pixel; one value per albedo class: 0.0001)
+    light = (0.1, 0.0, 2.4)
+    photo, truth = _photo(light, camera=light, roughness=0.2, seed=7)
+    start = _stored(dict(truth, roughness=np.full_like(truth["roughness"], 0.45)))
+    geo = geometry.CaptureGeometry(camera=light, light=light, highlight=light[:2])
+    res = refine.refine(photo, start, geo, 30)
+    assert float(cv.decode_maps(res.stored)["roughness"].std()) < 0.001 and not res.report["kept_start"]
+
+
+def test_the_roughness_change_is_one_value_per_class_read_where_the_lobe_is():
+    side = 32
+    diffuse = np.full((side, side, 3), 0.6, np.float32)
+    diffuse[:, side // 2:] = (0.05, 0.1, 0.4)  # two albedo classes: left grey, right blue
+    share = np.zeros((side, side), np.float32)
+    share[:8, :8] = 1.0  # the lobe shows only on the left's corner
+    basis = refine._class_basis(np.log(diffuse), share)
+    change = np.zeros((side, side, 1), np.float32)
+    change[:8, :8] = -0.1  # a blotch where the lobe is
+    change[20:, 20:] = 0.3  # and one the photo never showed
+    out = refine._per_class(change, basis)[..., 0]
+    assert np.allclose(out[:, : side // 2], -0.1, atol=0.003)  # the whole class takes what the lobe showed
+    assert np.allclose(out[:, side // 2:], 0.0, atol=0.003)  # a class the lobe never reached keeps none
