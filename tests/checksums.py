@@ -48,8 +48,8 @@ BLOCK = 4
 #: Within rounding: per map, the mean absolute difference of the block sums in levels per pixel (the
 #: sums' difference over BLOCK**2) at most MEAN_LEVELS, a block's at most MAX_LEVELS. Other kernels
 #: (OpenBLAS's SSE ones, onnxruntime without its graph optimisations) move the sample's maps by at most
-#: 0.0035 and 1.75; ten refinement steps fewer (``--refine 20``) by 0.15-1.4 on average (the mean is what
-#: tells a change from rounding, the block's limit only catches a local one).
+#: 0.0035 and 1.75; one refinement step fewer (``--refine 29``) by 0.03-0.38 on average (at most 1.81 in a
+#: block: the mean is what tells a change from rounding, the block's limit only catches a local one).
 MEAN_LEVELS = 0.015
 MAX_LEVELS = 4.0
 

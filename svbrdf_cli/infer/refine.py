@@ -86,14 +86,7 @@ class Priors:
     """
 
     diffuse: float = 0.05            # ((d - d0) / (d0 + 0.05))^2: relative
-    #: (r - r0)^2. With the roughness's change one value per albedo class (:data:`ROUGHNESS_CLASSES`)
-    #: the photo tells those few values well, and holding them near the start mostly kept the chain's
-    #: lobe where the photo's highlight says otherwise. Measured through ``svbrdf capture`` (``capture_eval
-    #: --all-card``; the 48 generated known-light captures, ``known_lights``) at 0.5 (with a roughness step
-    #: of 0.02), 0.1, 0.05 and 0.02 (step 0.1): Des19 roughness 0.1277, 0.1315, 0.1330, 0.1369; the card
-    #: 0.1199, 0.1191, 0.1181, 0.1169, from its 9 photos 0.1422, 0.1358, 0.1320, 0.1338; the captures 0.0741,
-    #: 0.0733, 0.0726, 0.0715; the other maps and relief within 0.0002.
-    roughness: float = 0.05
+    roughness: float = 0.5           # (r - r0)^2
     specular: float = 1.0            # (s - s0)^2
     normal: float = 1.02             # |tilt - tilt0|^2
     #: |(tilt - tilt0) blurred over BROAD_SIGMA|^2: no change of tilt over whole regions. The physical
@@ -113,7 +106,7 @@ class Priors:
 
 
 #: Adam step sizes per parameter (tilt, log diffuse, roughness, specular).
-STEP = {"tilt": 0.02, "diffuse": 0.03, "roughness": 0.1, "specular": 0.005}
+STEP = {"tilt": 0.02, "diffuse": 0.03, "roughness": 0.02, "specular": 0.005}
 #: Parameters whose Adam second moment is the whole map's (per channel), not each pixel's. Per pixel,
 #: Adam turns a gradient however small into a full step: the photo's gradient on the tilt changes sign
 #: across the highlight's row and column, and 30 steps drew a cross there in the normals (0.13 of tilt

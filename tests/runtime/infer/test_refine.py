@@ -514,14 +514,13 @@ def test_a_highlight_the_lobe_cannot_make_draws_no_disc_of_tilt_and_fine_relief_
 
 def test_a_uniform_roughness_stays_uniform():
     # one material under a textured diffuse: the fit may move its roughness, not paint the highlight's
-    # shape into it (a spread of 0.029 with a change per pixel; one value per albedo class: 0.0022, the
-    # classes of a brighter and a darker diffuse moving a little differently)
+    # shape into it (a spread of 0.0054 per pixel; one value per albedo class: 0.0001)
     light = (0.1, 0.0, 2.4)
     photo, truth = _photo(light, camera=light, roughness=0.2, seed=7)
     start = _stored(dict(truth, roughness=np.full_like(truth["roughness"], 0.45)))
     geo = geometry.CaptureGeometry(camera=light, light=light, highlight=light[:2])
     res = refine.refine(photo, start, geo, 30)
-    assert float(cv.decode_maps(res.stored)["roughness"].std()) < 0.005 and not res.report["kept_start"]
+    assert float(cv.decode_maps(res.stored)["roughness"].std()) < 0.001 and not res.report["kept_start"]
 
 
 def test_the_roughness_change_is_one_value_per_class_read_where_the_lobe_is():
