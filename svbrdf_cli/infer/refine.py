@@ -402,8 +402,8 @@ def _only_fine(change):
 def _lobe_share(p, lighting, weight):
     """(H, W) share of each pixel's rendered light that is the specular lobe's, at the maps ``p`` (0 where the
     photo ``weight`` is 0: clipped): where the photo tells the roughness."""
-    total, _ = shading.render_with_gradient(*_maps(p), lighting)
     t, d, r, s = _maps(p)
+    total, _ = shading.render_with_gradient(t, d, r, s, lighting)
     lobe, _ = shading.render_with_gradient(t, np.zeros_like(d), r, s, lighting)
     share = luminance(lobe) / np.maximum(luminance(total), 1e-6)
     return (np.clip(share, 0.0, 1.0) * weight[..., 0]).astype(np.float32)

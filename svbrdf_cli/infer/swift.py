@@ -32,8 +32,7 @@ import time
 import numpy as np
 
 from svbrdf_cli import conventions as cv
-from svbrdf_cli import imageops
-from svbrdf_cli.imageops import shrink_longest
+from svbrdf_cli.imageops import shrink_longest, soft_classes
 from svbrdf_cli.infer import flash_fields, tta
 from svbrdf_cli.infer.chain import SWIFT_FILE as FILE
 from svbrdf_cli.infer.chain import ModelError, padding, session
@@ -222,7 +221,7 @@ def roughness_from_observed(roughness, diffuse, highlight):
     if o is None:
         return roughness
     r = np.asarray(roughness, np.float32)[..., 0]
-    p = imageops.soft_classes(cv.albedo_to_linear(diffuse), ROUGHNESS_CLASSES)
+    p = soft_classes(cv.albedo_to_linear(diffuse), ROUGHNESS_CLASSES)
     seen = o.ravel()[:, None] * p
     mass = seen.sum(0)
     overall = float((o * r).sum() / max(float(o.sum()), 1e-6))
