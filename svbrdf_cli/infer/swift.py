@@ -120,7 +120,19 @@ def fill_highlight(diffuse, image, highlight=None, masks=None):
     0.0370, held-out relighting 0.0591 -> 0.0575, the card 0.1526 -> 0.1509; ``M_h`` too (at 1,066k)
     0.0374 -> 0.0367, 0.0575 -> 0.0572, the card 0.1415 -> 0.1418 (above 0.3: 0.0371, 0.0573, 0.1416).
     Filling where the estimate's fitted lobe is above 0.8 of the photo instead raised the card's
-    error (0.1527; above 0.5: 0.1624)."""
+    error (0.1527; above 0.5: 0.1624).
+
+    The smooth fill averages what surrounds the hole: on the bundled tiles the grout lines that cross the
+    highlight and the tiles' darker bevels make a grey diamond (its tiles 0.87 of the ring's brightness,
+    saturation 0.63 against 0.67). OpenCV's frequency-selective reconstruction (``cv2.xphoto.inpaint``,
+    fast mode, in CIELab) as the fill's base instead carried the grout on through it (saturation 0.67, the
+    diamond mostly gone) and relit better through the command (the card 0.1199 -> 0.1178, from its 9
+    photos 0.1422 -> 0.1419, the 48 generated known-light captures 0.0741 -> 0.0737, Des19 unchanged), but
+    it is not kept: on a synthetic grid with a hole about 40 px across it left a dark block in the middle
+    and moved the lines the chain had seen (their correlation with the true ones -0.48); its exact mode
+    fills such holes but takes 2.5 s at 256 px. Filling per albedo class, the class read from the photo's
+    hue (which a white highlight keeps), kept the tiles' saturation but not their brightness: the pixels
+    round the hole are the bevels' and the grout's."""
     from svbrdf_cli.imageops import fill_from_surroundings, luminance
     from svbrdf_cli.infer.physical import relative_texture, texture_beside
 
