@@ -53,7 +53,7 @@ from svbrdf_cli.rectify import highlight
 
 #: Bumped whenever the estimate's output changes: a network trained to refine one version
 #: must be fed that version (written into exported models and checked when they load).
-PHYSICAL_VERSION = "10"
+PHYSICAL_VERSION = "9"
 
 #: Roughness values the lobe fit tries (the lobe's width picks one).
 ROUGHNESS_GRID = np.linspace(0.08, 1.0, 47)
@@ -63,22 +63,8 @@ DEFAULT_ROUGHNESS = 0.6
 #: Rings of the radial profile around the flash foot.
 PROFILE_RINGS = 64
 #: Flash heights tried, as multiples of the assumed one (the falloff's steepness; the
-#: irradiance at the foot stays the convention's, so the albedo level does not move). The chain trains
-#: on photos of fields of view from 20 to 75 degrees (0.55 to 2.35 times the assumed height), and
-#: ``card_blue_9lights`` was shot from 2.0 times it (16.7 cm over a 6.8 cm square). Up to 1.35, the fit
-#: sat at its top on 19 of the 34 real photos of ``export.studies.artist_check`` and on 8 of the card's
-#: 9 (at its bottom on the ninth), and the chain, the estimate and ``--refine`` took the flash 33 % too low
-#: there; up to 2.0 it reads 2.0 on all 9. Measured
-#: through ``svbrdf capture`` (``capture_eval --all-card``; Des19 normal, relief, diffuse, roughness,
-#: specular; the card relit from photo 00 and from each of its photos; the 48 generated known-light
-#: captures), up to 1.35: 0.0478, 0.422, 0.0321, 0.1277, 0.0579, 0.1199, 0.1422, 0.0741; **up to 2.0**:
-#: 0.0480, 0.412, 0.0320, 0.1271, 0.0582, 0.1117, 0.1305, 0.0770; up to 2.35: Des19's metals go to the
-#: top (diffuse 0.0331, roughness 0.1307) for the same card (0.1120, 0.1292); from 0.55 as well, diffuse
-#: 0.0394; the assumed height alone, the card 0.1351 (0.1524). Des19 relit under held-out lights
-#: (``refine_eval``) 0.0582 -> 0.0598. The fit is a weak reading of the height:
-#: on the generated captures, whose true heights are known, its RMS error in log height is 0.29 up to
-#: 1.35 and 0.42 up to 2.0 (it sits at the grid's top more often), and there they relight worse.
-HEIGHT_GRID = np.array([0.75, 0.87, 1.0, 1.15, 1.35, 1.6, 2.0])
+#: irradiance at the foot stays the convention's, so the albedo level does not move).
+HEIGHT_GRID = np.array([0.75, 0.87, 1.0, 1.15, 1.35])
 #: A dielectric's lobe height over its diffuse level at most: F0 = 0.04 over an albedo
 #: of at least 0.02 (the darkest common dielectrics, black leather or rubber). The bound does not
 #: cost the metals a tell: without it (roughness at most 0.5) the ring profile reads no diffuse floor
