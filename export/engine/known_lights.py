@@ -23,7 +23,8 @@ from export.render.brdf import render_maps
 from export.render.relight import fit_intensity
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.imageops import resize
-from svbrdf_cli.infer.exposure import network_input
+from svbrdf_cli.infer.exposure import (NETWORK_SIZE, auto_exposure_gain, network_input, photo_level,
+                                       to_photo_level)
 from svbrdf_cli.write.mapset import stored_to_linear
 
 #: Seed of the captures (none of the bank's, the runs' validation's nor ``refine_eval``'s: see above).
@@ -151,10 +152,30 @@ def relight_rmse(stored, photos, lights, cameras):
 
 
 def score(stored, capture):
-    """:func:`relight_rmse` of ``stored`` maps on one capture of :func:`captures`."""
+    """:func:`relight_rmse` of ``stored`` maps on one capture of :func:`captures`, as they are (the true
+    maps; a method's: :func:`score_as_shot`)."""
     return relight_rmse(stored, capture["photos"], capture["lights"], capture["cameras"])
 
 
 def photo_input(capture):
     """Photo 0 as ``svbrdf capture`` feeds it to a method (auto exposure, 256², encoded)."""
     return network_input(cv.image_to_linear(encoded(capture["photos"][0])))
+
+
+def photo_gain(capture):
+    """The stops ``svbrdf capture``'s auto exposure adds to photo 0 (:func:`photo_input`'s)."""
+    return auto_exposure_gain(resize(cv.image_to_linear(encoded(capture["photos"][0])), NETWORK_SIZE))
+
+
+def as_shot(stored, capture, specular=False):
+    """A method's ``stored`` maps of :func:`photo_input` as ``svbrdf capture`` writes them: the diffuse (with
+    ``specular``, for a model whose F0 is read at the photo's level, the F0 too) brought back to photo 0 as
+    shot (:func:`svbrdf_cli.infer.exposure.photo_level`, ``docs/conventions.md``, "The albedo level")."""
+    return to_photo_level(stored, photo_level(photo_gain(capture)), specular=specular)
+
+
+def score_as_shot(stored, capture, specular=False):
+    """:func:`score` of a method's maps of :func:`photo_input` as the command writes them (:func:`as_shot`).
+    Relighting fits one intensity, so only the diffuse's level against the F0's counts: a photo exposed
+    as the convention assumes reads the ratio right, one exposed otherwise reads it off by as much."""
+    return score(as_shot(stored, capture, specular), capture)

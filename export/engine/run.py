@@ -536,7 +536,8 @@ class Run:
             if self.known_lights is None:
                 self.known_lights = self._load_known_lights()
             if self.known_lights:
-                entry.update(score_known_lights(self.net, self.known_lights, self.config.size))
+                entry.update(score_known_lights(self.net, self.known_lights, self.config.size,
+                                                specular=self.config.specular_level == "photo"))
         with open(os.path.join(self.folder, "curve.jsonl"), "a") as f:
             f.write(json.dumps(entry) + "\n")
         self.log(f"eval: {json.dumps(entry)}")
@@ -743,19 +744,20 @@ def score_card(net, card, size, refine_steps=DEFAULT_ITERATIONS):
 KNOWN_LIGHTS_COUNT = 16
 
 
-def score_known_lights(net, caps, size, refine_steps=DEFAULT_ITERATIONS):
+def score_known_lights(net, caps, size, refine_steps=DEFAULT_ITERATIONS, specular=False):
     """The mean relighting errors, on the generated captures ``caps`` (:mod:`export.engine.known_lights`),
-    of the chain's maps as ``svbrdf capture`` makes them from each photo 0: ``{"known_lights": ...,
-    "known_lights_refined": ...}``. The card is one real material; these are many, so a state that
-    gains on Des19 and the card while it drifts from materials it never saw shows here."""
-    from export.engine.known_lights import photo_input, score
+    of the chain's maps as ``svbrdf capture`` writes them from each photo 0 (the diffuse, and with
+    ``specular`` the F0, at the photo's level as shot): ``{"known_lights": ..., "known_lights_refined":
+    ...}``. The card is one real material; these are many, so a state that gains on Des19 and the card
+    while it drifts from materials it never saw shows here."""
+    from export.engine.known_lights import photo_input, score_as_shot
 
     twin = runtime_twin(net, size)
     plain, refined = [], []
     for c in caps:
         maps, better = captured_maps(twin, photo_input(c), refine_steps)
-        plain.append(score(maps, c))
-        refined.append(score(better, c))
+        plain.append(score_as_shot(maps, c, specular))
+        refined.append(score_as_shot(better, c, specular))
     return {"known_lights": round(float(np.mean(plain)), 4), "known_lights_refined": round(float(np.mean(refined)), 4)}
 
 

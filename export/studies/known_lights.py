@@ -29,7 +29,9 @@ score on real-like held-out lights does not rest on one card:
 * **the score**: :func:`relight_rmse`, :meth:`export.render.relight.NineLights.relight_rmse` with the
   camera where it was: one intensity fitted on photo 0 (:func:`export.render.relight.fit_intensity`),
   then the RMSE of the encoded renders against photos 1-8, lit as they were, saturated pixels left
-  out. Beside the methods: the floor (:class:`export.studies.methods.Floor`) on the same input, and
+  out; a method's maps (the floor's too) scored as the command writes them, the diffuse brought back to
+  photo 0 as shot (:func:`export.engine.known_lights.score_as_shot`): relighting fits one intensity, so
+  what counts is the diffuse's level against the F0's, which the albedo convention sets. Beside the methods: the floor (:class:`export.studies.methods.Floor`) on the same input, and
   the true maps (``truth``: what the photos' noise, tone curve and white balance leave unexplained).
 
 The captures are kept in ``~/.cache/svbrdf/known_lights/<seed>_<count>.npz`` (:func:`captures`);
@@ -47,7 +49,7 @@ import numpy as np
 import torch
 
 from export.engine.known_lights import (CACHE_DIR, COUNT, LIGHTS, SEED, SIZE, captures, photo_input,
-                                        score)
+                                        score, score_as_shot)
 from export.files import command_errors
 from export.studies import methods as method_zoo
 from svbrdf_cli.infer.refine import DEFAULT_ITERATIONS
@@ -79,15 +81,16 @@ def run(caps, zoo, settings=(0, DEFAULT_ITERATIONS), log=print, priors=None):
     setting of ``settings`` on the captures ``caps`` (``priors``: :class:`svbrdf_cli.infer.refine.Priors`
     other than the default's)."""
     images = [photo_input(c) for c in caps]
-    floor = [score(method_zoo.Floor()(im), c) for im, c in zip(images, caps)]
+    floor = [score_as_shot(method_zoo.Floor()(im), c) for im, c in zip(images, caps)]
     rows = [row("floor", None, floor, None), row("truth", None, [score(c["truth"], c) for c in caps], floor)]
     for m in zoo:
         once, t0 = Once(m), time.perf_counter()
         runners = [(n, method_zoo.Refined(once, n, priors=priors) if n else once) for n in settings]
         errors = {n: [] for n in settings}
+        specular = getattr(getattr(m, "chain", None), "specular_level", "absolute") == "photo"
         for im, c in zip(images, caps):
             for n, f in runners:
-                errors[n].append(score(f(im), c))
+                errors[n].append(score_as_shot(f(im), c, specular))
         rows += [row(m.name, n, errors[n], floor) for n in settings]
         log(f"{m.name}: {len(caps)} captures in {time.perf_counter() - t0:.0f} s")
     return rows

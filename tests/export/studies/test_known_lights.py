@@ -48,6 +48,26 @@ def test_the_score_can_fail_another_materials_maps_relight_a_capture_badly(caps)
     assert gen.score(Floor()(gen.photo_input(caps[0])), caps[0]) > 2 * own
 
 
+def test_a_methods_maps_are_scored_as_the_command_writes_them_at_the_photos_level_as_shot(caps):
+    """The command writes the diffuse of the photo as shot (``docs/conventions.md``): the floor's, 0.6 x the
+    photo the method was given (exposed for the networks), comes back to 0.6 x photo 0 as shot, and the
+    F0 stays where it was; relighting then scores a different diffuse-to-F0 ratio than the exposed maps'."""
+    from svbrdf_cli import conventions as cv
+    from svbrdf_cli.imageops import resize
+    from svbrdf_cli.write.mapset import stored_to_linear
+
+    c = max(caps, key=lambda c: abs(gen.photo_gain(c)))
+    assert abs(gen.photo_gain(c)) > 0.3  # a capture the auto exposure changes
+    floor = Floor()(gen.photo_input(c))
+    shot = stored_to_linear(gen.as_shot(floor, c))
+    side = floor["diffuse"].shape[0]  # photo_input's
+    photo = resize(cv.image_to_linear(gen.encoded(c["photos"][0])), side)
+    unclipped = (cv.image_to_encoded(photo) < 0.9).all(-1)
+    assert np.allclose(shot["diffuse"][unclipped], 0.6 * photo[unclipped], atol=0.01)
+    assert np.allclose(shot["specular"], stored_to_linear(floor)["specular"])
+    assert abs(gen.score_as_shot(floor, c) - gen.score(floor, c)) > 1e-3
+
+
 def test_the_same_seed_gives_the_same_captures_and_another_seed_others():
     a, b, other = gen.generate(1, seed=7, size=SIZE), gen.generate(1, seed=7, size=SIZE), gen.generate(1, seed=8, size=SIZE)
     for k in ("photos", "lights", "cameras"):
