@@ -70,7 +70,7 @@ def material(g, size):
     return {k: maps[k].float().contiguous() for k in cv.MAP_NAMES}
 
 
-def generate(index, seed=SEED, size=SIZE, ranges=simulate.DEFAULT_RANGES):
+def generate(index, seed=SEED, size=SIZE, ranges=simulate.DEFAULT_RANGES, colocated=False):
     """Capture ``index`` of ``seed``: ``photos`` (1 + LIGHTS, size, size, 3) uint8, photo 0 by the flash;
     ``lights`` and ``cameras`` (1 + LIGHTS, 3), where each photo was lit and taken from; ``truth`` the
     material's maps, stored encoding (HWC, 8 bits as a map file holds them)."""
@@ -83,23 +83,29 @@ def generate(index, seed=SEED, size=SIZE, ranges=simulate.DEFAULT_RANGES):
         # keeps photo 0's exposure
         first = batches.photograph(maps, capture, g, cap=False)
         fixed = dict(capture, power=first["intensity"].float().reshape(1))  # the same exposure for every photo
-        photos = [first["photo"]] + [batches.photograph(maps, dict(fixed, light=light[None].float()), g, cap=False)["photo"]
-                                     for light in lights[1:]]
+        # colocated: each photo taken from its light (the card's rig: a phone's flash moved with its lens, the
+        # photos rectified), the view moving with the highlight; else from photo 0's camera
+        views = [light[None].float() if colocated else capture["camera"] for light in lights[1:]]
+        photos = [first["photo"]] + [batches.photograph(maps, dict(fixed, light=light[None].float(), camera=view), g,
+                                                        cap=False)["photo"] for light, view in zip(lights[1:], views)]
+        cameras = torch.cat([capture["camera"].double(), lights[1:]]) if colocated else \
+            capture["camera"].double().repeat(len(lights), 1)
     photos = torch.cat(photos).permute(0, 2, 3, 1).numpy()
     truth = cv.encode_maps({k: v[0].permute(1, 2, 0).numpy() for k, v in maps.items()})
     return {"photos": np.round(photos * 255).astype(np.uint8),
-            "lights": lights.numpy(), "cameras": np.repeat(capture["camera"].double().numpy(), len(lights), 0),
+            "lights": lights.numpy(), "cameras": cameras.numpy(),
             "truth": {k: np.round(np.clip(truth[k], 0, 1) * 255).astype(np.uint8) for k in cv.MAP_NAMES}}
 
 
-def cache_path(seed, count, size, cache_dir=CACHE_DIR):
-    return os.path.join(cache_dir, f"{seed}_{count}.npz" if size == SIZE else f"{seed}_{count}_{size}.npz")
+def cache_path(seed, count, size, cache_dir=CACHE_DIR, colocated=False):
+    name = f"{seed}_{count}" + ("" if size == SIZE else f"_{size}") + ("_colocated" if colocated else "")
+    return os.path.join(cache_dir, name + ".npz")
 
 
-def captures(count=COUNT, seed=SEED, size=SIZE, cache_dir=CACHE_DIR, log=None):
-    """Captures 0 .. ``count`` - 1 of ``seed`` (:func:`generate`), from the cache in ``cache_dir`` when
+def captures(count=COUNT, seed=SEED, size=SIZE, cache_dir=CACHE_DIR, log=None, colocated=False):
+    """Captures 0 .. ``count`` - 1 of ``seed`` (:func:`generate`, ``colocated`` or not), from the cache in ``cache_dir`` when
     it holds them (made and kept there otherwise; ``cache_dir`` None: no cache)."""
-    path = cache_path(seed, count, size, cache_dir) if cache_dir else None
+    path = cache_path(seed, count, size, cache_dir, colocated) if cache_dir else None
     if path and os.path.isfile(path):
         with np.load(path) as z:
             if int(z["version"]) == VERSION:
@@ -108,7 +114,7 @@ def captures(count=COUNT, seed=SEED, size=SIZE, cache_dir=CACHE_DIR, log=None):
     t0 = time.perf_counter()
     out = []
     for i in range(count):
-        out.append(generate(i, seed, size))
+        out.append(generate(i, seed, size, colocated=colocated))
         if log and (i + 1) % 16 == 0:
             log(f"captures: {i + 1}/{count} ({time.perf_counter() - t0:.0f} s)")
     if path:

@@ -3,6 +3,7 @@
     python -m export.studies.known_lights                      # physical + every installed tier, --refine 0 and 60
     python -m export.studies.known_lights --methods physical --model-dir svbrdf_cli/models/swift
     python -m export.studies.known_lights --count 8 --refine 0 --json known_lights.json
+    python -m export.studies.known_lights --colocated   # each photo from its light, as the card's rig
 
 ``card_blue_9lights`` (:class:`export.render.relight.NineLights`) is one real material photographed
 under 9 known lights; this study makes :data:`COUNT` such captures from the data engine, so that a
@@ -22,7 +23,8 @@ score on real-like held-out lights does not rest on one card:
   :data:`LIGHTS` more at the same exposure and with the same camera, the light moved to known
   positions round the lens as the card's were (:func:`ring`): the card's 8 other lights sit 0.11-0.22
   of the camera's height from photo 00's, from 2 % below to 13 % above it. Every photo at 256²,
-  with its own sensor noise;
+  with its own sensor noise. With ``--colocated`` each of them is taken from its light, as the card's
+  were (a phone moved with its flash, the photos rectified), so the view moves with the highlight;
 * **the maps**: from photo 0 as ``svbrdf capture`` makes them (:mod:`export.studies.methods`: the photo
   exposed for the networks, the geometry estimated from the photo alone, ``--refine`` with
   :class:`export.studies.methods.Refined`), exactly as ``refine_eval`` scores the card;
@@ -124,12 +126,14 @@ def methods_to_run(names=None, extra=()):
 @click.option("--refine", "steps", default=DEFAULT_ITERATIONS, show_default=True, metavar="N",
               help="Each method without refinement and with --refine N (0: without only).")
 @click.option("--seed", default=SEED, show_default=True, help="Seed of the captures (a fresh set: another seed).")
+@click.option("--colocated", is_flag=True,
+              help="Each photo taken from its own light (the card's rig: the view moves with the light), not from photo 0's camera.")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None)
 @click.option("--cache", "cache_dir", default=CACHE_DIR, show_default=True, type=click.Path(file_okay=False),
               help="Where the captures are kept between runs.")
 @click.option("--prior", "prior_pairs", multiple=True, metavar="NAME=VALUE",
               help="A --refine prior weight other than the default's (svbrdf_cli.infer.refine.Priors); repeatable.")
-def cli(count, methods, extra, steps, seed, json_out, cache_dir, prior_pairs):
+def cli(count, methods, extra, steps, seed, colocated, json_out, cache_dir, prior_pairs):
     from export.studies.refine_eval import parse_priors
 
     torch.set_num_threads(1)
@@ -137,14 +141,15 @@ def cli(count, methods, extra, steps, seed, json_out, cache_dir, prior_pairs):
     t0 = time.perf_counter()
     with command_errors():
         zoo = methods_to_run(methods.split(",") if methods else None, extra)
-        caps = captures(count, seed, SIZE, cache_dir, log=click.echo)
+        caps = captures(count, seed, SIZE, cache_dir, log=click.echo, colocated=colocated)
         click.echo(f"{count} captures of seed {seed} ready in {time.perf_counter() - t0:.0f} s")
         rows = run(caps, zoo, (0, steps) if steps else (0,), log=click.echo, priors=priors)
     click.echo(table(rows))
     click.echo(f"({time.perf_counter() - t0:.0f} s in all)")
     if json_out:
         with open(json_out, "w") as f:
-            json.dump({"seed": seed, "count": count, "size": SIZE, "lights": LIGHTS, "rows": rows}, f, indent=2)
+            json.dump({"seed": seed, "count": count, "size": SIZE, "lights": LIGHTS, "colocated": colocated, "rows": rows},
+                      f, indent=2)
 
 
 if __name__ == "__main__":

@@ -68,6 +68,19 @@ def test_a_methods_maps_are_scored_as_the_command_writes_them_at_the_photos_leve
     assert abs(gen.score_as_shot(floor, c) - gen.score(floor, c)) > 1e-3
 
 
+def test_colocated_captures_take_each_photo_from_its_light_and_keep_photo_0():
+    """``--colocated``: the card's rig, the view moving with each light; photo 0 and the material are the
+    standard capture's, the other photos differ from it only in where they were taken from."""
+    plain, colo = gen.generate(2, size=SIZE), gen.generate(2, size=SIZE, colocated=True)
+    assert np.array_equal(colo["cameras"][1:], colo["lights"][1:])
+    assert np.array_equal(colo["cameras"][0], plain["cameras"][0]) and np.array_equal(colo["lights"], plain["lights"])
+    assert np.array_equal(colo["photos"][0], plain["photos"][0])
+    assert all(np.array_equal(colo["truth"][k], plain["truth"][k]) for k in plain["truth"])
+    assert np.abs(colo["photos"][1:].astype(int) - plain["photos"][1:]).mean() > 0.5
+    own = gen.score(colo["truth"], colo)
+    assert own < 0.5 * gen.score(plain["truth"], colo) or own < 0.5 * gen.score(Floor()(gen.photo_input(colo)), colo)
+
+
 def test_the_same_seed_gives_the_same_captures_and_another_seed_others():
     a, b, other = gen.generate(1, seed=7, size=SIZE), gen.generate(1, seed=7, size=SIZE), gen.generate(1, seed=8, size=SIZE)
     for k in ("photos", "lights", "cameras"):
