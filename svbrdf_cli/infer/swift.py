@@ -255,6 +255,30 @@ def roughness_from_observed(roughness, diffuse, highlight):
 ESTIMATE_LEVEL = 0.5
 
 
+def estimate_weight(flash_height):
+    """The physical estimate's weight in :func:`level_with_estimate` for the fitted ``flash_height``:
+    :data:`ESTIMATE_LEVEL`, or 0 where the fit sits at the top of its grid
+    (:data:`svbrdf_cli.infer.physical.HEIGHT_GRID`).
+
+    The estimate divides the photo by the fall-off of its fitted height; at the grid's top it reads the
+    flattest fall-off it may, and its level comes out darkest. On Des19's 21 dielectrics the 10 fitted
+    there read 0.84 stops too dark by the estimate and 0.26 by the chain (fitted at the bottom: 0.06 too
+    dark and 0.38 too bright). Measured through the command with the installed chain (``capture_eval
+    --all-card``, ``known_lights``): Des19's diffuse 0.0321 -> 0.0308, every other map, the card (0.1199;
+    9 photos 0.1422 -> 0.1423) and the 48 generated known-light captures (0.0651 -> 0.0652;
+    ``--colocated`` 0.0669 -> 0.0670) unchanged. The weight falling all the way from 1 at the grid's
+    bottom took Des19 to 0.0300 but the generated captures to 0.0670: there the chain's level is the
+    better one at the bottom too."""
+    from svbrdf_cli.infer.physical import HEIGHT_GRID
+
+    return 0.0 if flash_height >= TOP_OF_GRID * HEIGHT_GRID[-1] * cv.CAMERA_HEIGHT else ESTIMATE_LEVEL
+
+
+#: :func:`estimate_weight`: a fitted height at least this share of the grid's top is at the top (the fit
+#: reports it rounded).
+TOP_OF_GRID = 0.999
+
+
 def estimate_diffuse(image, size=None):
     """The physical estimate's stored diffuse (:func:`svbrdf_cli.infer.physical.estimate`) of the encoded
     ``image`` area-shrunk to ``size`` first (None: as it is)."""
@@ -281,14 +305,7 @@ def level_with_estimate(diffuse, image, size=None, weight=ESTIMATE_LEVEL, estima
     half: the real card and the artist materials gain, the bank's kind loses least. ``estimate``: the
     estimate's diffuse (:func:`estimate_diffuse`) if the caller has it.
 
-    Both levels follow the fitted flash height, which sits at a bound of its grid on most photos. On
-    Des19's 21 dielectrics, fitted at the grid's bottom (9) the chain reads 0.38 stops too bright and the
-    estimate 0.06 too dark; at its top (10), 0.26 and 0.84 too dark. The estimate's weight falling with
-    the fitted height (1 at the bottom, 0 at the top, linear in its log), measured through the command
-    with the installed chain and not kept: Des19's diffuse 0.0321 -> 0.0300 (every other map unchanged),
-    the card unchanged (0.1199, 9 photos 0.1422), but the 48 generated known-light captures 0.0651 ->
-    0.0670, on the 34 that clip under 2 % 0.0541 -> 0.0565: on the bank's kind of material the chain's
-    level is the better one at the bottom too."""
+    The caller sets ``weight`` by the fitted flash height (:func:`estimate_weight`)."""
     if estimate is None:
         estimate = estimate_diffuse(image, size)
     est = cv.albedo_to_linear(np.asarray(estimate, np.float32)).reshape(-1, 3).mean(0)
@@ -439,7 +456,8 @@ class SwiftModel:
         out["roughness"] = roughness_from_observed(out["roughness"], out["diffuse"], out["M_h"])
         estimate = estimate_diffuse(image, self.run_size)
         out.update(read_as_dielectric(out, estimate))
-        out["diffuse"] = level_with_estimate(out["diffuse"], image, self.run_size, estimate=estimate)
+        out["diffuse"] = level_with_estimate(out["diffuse"], image, self.run_size,
+                                             weight=estimate_weight(self.found["flash_height"]), estimate=estimate)
         self.timings["physics"] = time.perf_counter() - t0
         return out
 

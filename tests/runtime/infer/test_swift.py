@@ -304,3 +304,22 @@ def test_where_the_chain_guessed_a_metal_its_maps_are_read_as_a_dielectrics():
     gold = np.broadcast_to(np.float32([0.6, 0.45, 0.2]), f0.shape)
     allmetal = {"diffuse": stored["diffuse"], "specular": cv.albedo_to_stored(gold).astype(np.float32)}
     np.testing.assert_allclose(read_as_dielectric(allmetal, estimate)["diffuse"], 0.5, atol=1e-6)
+
+
+def test_the_estimates_level_is_left_out_where_its_flash_height_fit_ran_to_the_top_of_its_grid():
+    """The estimate's level divides by the fall-off of its fitted height; at the grid's top (the flattest
+    fall-off it may read) it comes out darkest, and the chain's own level is kept."""
+    from svbrdf_cli.infer.physical import HEIGHT_GRID
+    from svbrdf_cli.infer.swift import ESTIMATE_LEVEL, estimate_weight, level_with_estimate
+
+    top, bottom = HEIGHT_GRID[-1] * cv.CAMERA_HEIGHT, HEIGHT_GRID[0] * cv.CAMERA_HEIGHT
+    assert estimate_weight(round(top, 4)) == 0.0
+    assert estimate_weight(bottom) == estimate_weight(cv.CAMERA_HEIGHT) == ESTIMATE_LEVEL > 0
+    g = np.random.default_rng(3)
+    chain = cv.albedo_to_stored(0.3 * (0.8 + 0.4 * g.random((32, 32, 3)))).astype(np.float32)
+    estimate = cv.albedo_to_stored(np.full((32, 32, 3), 0.075)).astype(np.float32)  # two stops darker
+    kept = level_with_estimate(chain, None, weight=estimate_weight(top), estimate=estimate)
+    halfway = level_with_estimate(chain, None, weight=estimate_weight(bottom), estimate=estimate)
+    level = lambda x: float(cv.albedo_to_linear(x).mean())  # noqa: E731
+    assert abs(level(kept) / level(chain) - 1) < 0.01
+    assert 0.4 < level(halfway) / level(chain) < 0.6  # a stop darker: halfway in log
