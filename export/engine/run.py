@@ -532,7 +532,8 @@ class Run:
             if self.card is None:
                 self.card = (load_card() if self.des19 is None else None) or False
             if self.card:
-                entry.update(score_card(self.net, self.card, self.config.size))
+                entry.update(score_card(self.net, self.card, self.config.size,
+                                        specular=self.config.specular_level == "photo"))
             if self.known_lights is None:
                 self.known_lights = self._load_known_lights()
             if self.known_lights:
@@ -732,11 +733,17 @@ def captured_maps(twin, image, refine_steps=DEFAULT_ITERATIONS):
     return maps, {k: refined[k] for k in cv.MAP_NAMES}
 
 
-def score_card(net, card, size, refine_steps=DEFAULT_ITERATIONS):
-    """The card's relighting errors of the chain's maps from photo 00 as ``svbrdf capture`` makes them
-    (:func:`captured_maps`), lit as the 8 other photos were: ``{"card": ..., "card_refined": ...}``, the
-    second after ``--refine refine_steps`` on the same maps."""
-    maps, refined = captured_maps(runtime_twin(net, size), card.network_input(), refine_steps)
+def score_card(net, card, size, refine_steps=DEFAULT_ITERATIONS, specular=False):
+    """The card's relighting errors of the chain's maps from photo 00 as ``svbrdf capture`` writes them
+    (:func:`captured_maps`, the diffuse, and with ``specular`` the F0, brought back to the photo as shot),
+    lit as the 8 other photos were: ``{"card": ..., "card_refined": ...}``, the second after ``--refine
+    refine_steps`` on the same maps."""
+    from svbrdf_cli.imageops import resize
+    from svbrdf_cli.infer.exposure import NETWORK_SIZE, auto_exposure_gain, photo_level, to_photo_level
+
+    level = photo_level(auto_exposure_gain(resize(cv.image_to_linear(card.photos[0]), NETWORK_SIZE)))
+    maps, refined = (to_photo_level(m, level, specular) for m in
+                     captured_maps(runtime_twin(net, size), card.network_input(), refine_steps))
     return {"card": round(card.relight_rmse(maps), 4), "card_refined": round(card.relight_rmse(refined), 4)}
 
 

@@ -726,6 +726,22 @@ def test_the_run_scores_its_chain_on_generated_captures_under_known_lights():
     assert 0 < truth < 0.5 * got["known_lights"] < 1 and 0 < got["known_lights_refined"] < 1
 
 
+def test_the_run_scores_the_card_with_its_maps_as_the_command_writes_them():
+    """``card`` in ``curve.jsonl``: photo 00's maps with the diffuse brought back to the photo as shot, as
+    ``svbrdf capture`` writes them (``docs/conventions.md``), not at the level exposed for the networks."""
+    from export.engine.run import load_card, score_card
+
+    card = load_card()
+    if card is None:
+        pytest.skip("needs ../shared/data/real/card_blue_9lights")
+    got = score_card(_speaking_net(), card, 64, refine_steps=0)
+    assert set(got) == {"card", "card_refined"} and 0 < got["card"] < 1
+    from export.engine.run import captured_maps, runtime_twin
+
+    exposed, _ = captured_maps(runtime_twin(_speaking_net(), 64), card.network_input(), 0)
+    assert abs(card.relight_rmse(exposed) - got["card"]) > 1e-4  # photo 00 was exposed down: a brighter diffuse
+
+
 def test_the_f0_target_at_the_photos_level_scales_as_the_diffuse():
     g = torch.Generator().manual_seed(6)
     up = torch.tensor([0, 0, 2.0]).reshape(1, 3, 1, 1)
