@@ -16,6 +16,7 @@ import click
 
 from export.engine import bank as bank_mod
 from export.engine import keep_memory
+from export.engine.batches import FLASH_CONTEXTS
 from svbrdf_cli.conventions import SPECULAR_LEVELS
 
 #: The committed compact checkpoint of the current run (export.engine.run.write_compact).
@@ -77,8 +78,11 @@ def _setup(threads):
                    "the diffuse (the run keeps it).")
 @click.option("--halve-every", type=click.IntRange(1), default=None,
               help="The learning rate halves every this many samples of a stage from now on (the run keeps it).")
+@click.option("--flash-context", type=click.Choice(FLASH_CONTEXTS), default=None,
+              help="Where the networks' flash context comes from, from now on: the true flash jittered, or the "
+                   "runtime's fit on the photo (the run keeps it).")
 def train(folder, threads, steps, minutes, checkpoint_minutes, eval_minutes, checkpoint, schedule, restart_stage,
-          bank_count, weight_pairs, specular_level, halve_every):
+          bank_count, weight_pairs, specular_level, halve_every, flash_context):
     """Train the swift chain in FOLDER, or resume it; SIGTERM/SIGINT save and exit 0."""
     import dataclasses
     import os
@@ -99,6 +103,9 @@ def train(folder, threads, steps, minutes, checkpoint_minutes, eval_minutes, che
     if specular_level and specular_level != run.config.specular_level:
         changes["specular_level"] = specular_level
         click.echo(f"the maps stage's F0 target from step {run.step}: {specular_level}", err=True)
+    if flash_context and flash_context != run.config.flash_context:
+        changes["flash_context"] = flash_context
+        click.echo(f"the networks' flash context from step {run.step}: {flash_context}", err=True)
     if halve_every and halve_every != run.config.halve_every:
         click.echo(f"the learning rate halves every {halve_every} samples of a stage from step {run.step}", err=True)
     if changes:
@@ -162,7 +169,10 @@ def _schedule(text):
               help=f"Passed to train: the compact checkpoint a run folder without a state starts from (default {CHECKPOINT}).")
 @click.option("--halve-every", type=click.IntRange(1), default=None,
               help="Passed to train: the learning rate halves every this many samples of a stage from now on.")
-def background(folder, schedule, restart_stage, bank_count, weight_pairs, specular_level, checkpoint, halve_every):
+@click.option("--flash-context", type=click.Choice(FLASH_CONTEXTS), default=None,
+              help="Passed to train: where the networks' flash context comes from, from now on.")
+def background(folder, schedule, restart_stage, bank_count, weight_pairs, specular_level, checkpoint, halve_every,
+               flash_context):
     """Resume (or start) the run in FOLDER detached, on one core; its log is FOLDER/log.txt."""
     import os
     import subprocess
@@ -186,6 +196,7 @@ def background(folder, schedule, restart_stage, bank_count, weight_pairs, specul
         args += ["--specular-level", specular_level] if specular_level else []
         args += ["--checkpoint", checkpoint] if checkpoint else []
         args += ["--halve-every", str(halve_every)] if halve_every else []
+        args += ["--flash-context", flash_context] if flash_context else []
         p = subprocess.Popen(args,
                              stdout=log, stderr=log, stdin=subprocess.DEVNULL, start_new_session=True, env=env)
     with open(pid_file, "w") as f:

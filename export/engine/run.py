@@ -81,6 +81,9 @@ class RunConfig:
     #: the photo's flash level as the diffuse (an export records it; the runtime then scales F0 as it
     #: scales the diffuse).
     specular_level: str = "absolute"
+    #: Where the flash of the networks' context comes from (:data:`export.engine.batches.FLASH_CONTEXTS`): the
+    #: true one jittered, or the runtime's fit on the photo.
+    flash_context: str = "jitter"
 
 
 def _config_from(d):
@@ -392,7 +395,8 @@ class Run:
         if real:
             loss = c.real_weight * real_loss(self.net, self.real.batch(self.g, c.batch, c.size))
         else:
-            b = batches.make(bank, self.g, c.batch, c.size, self.stage, specular_level=c.specular_level)
+            b = batches.make(bank, self.g, c.batch, c.size, self.stage, specular_level=c.specular_level,
+                             flash_context=c.flash_context)
             if self.stage == "maps" and dict(c.weights).get("render"):
                 b["lights"], b["cameras"] = render_views(self.g, c.batch)
             loss = stage_loss(self.net, self.stage, b)
@@ -500,8 +504,8 @@ class Run:
     def _val_batches(self, stage):
         g = torch.Generator().manual_seed(12345)
         n = self.config.val_samples
-        return [batches.make(self.load_bank(), g, 16, self.config.size, stage,
-                             specular_level=self.config.specular_level) for _ in range(max(1, n // 16))]
+        return [batches.make(self.load_bank(), g, 16, self.config.size, stage, specular_level=self.config.specular_level,
+                             flash_context=self.config.flash_context) for _ in range(max(1, n // 16))]
 
     @torch.no_grad()
     def validate(self, stage):

@@ -822,3 +822,21 @@ def test_bf16_autocast_only_where_the_cpu_has_it(tmp_path, monkeypatch):
     assert run_mod.native_bf16(str(avx2))
     monkeypatch.setenv("SVBRDF_AUTOCAST", "fp32")
     assert not run_mod.native_bf16(str(bf16))
+
+
+def test_the_flash_context_can_be_the_runtimes_fit_on_the_photo(small_bank):
+    """``--flash-context fit``: the networks get the flash where ``svbrdf capture`` reads it from the photo
+    (its foot found in the photo, its height one of the fit's grid), not the true one jittered."""
+    from svbrdf_cli.infer.physical import HEIGHT_GRID
+
+    g = torch.Generator().manual_seed(3)
+    b = batches.make(bank_mod.Bank(small_bank), g, 4, 64, "maps", flash_context="fit")
+    seen = batches.fitted_flash(b["photo"])
+    assert torch.allclose(b["context"], flash.context(seen, seen, 64))  # what the batch's context was made from
+    grid = HEIGHT_GRID * cv.CAMERA_HEIGHT
+    assert all(np.abs(grid - h).min() < 1e-3 for h in seen[:, 2].tolist())
+    assert (seen[:, :2] - b["light"][:, :2]).abs().max() < 0.6  # the highlight's foot, near the flash's
+    jitter = batches.context_flash(b["photo"], b["light"], torch.Generator().manual_seed(0), "jitter")
+    assert ((jitter[:, 2] / b["light"][:, 2]).log().abs() < 0.5).all()
+    with pytest.raises(ValueError):
+        batches.context_flash(b["photo"], b["light"], g, "exif")
