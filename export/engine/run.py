@@ -531,7 +531,7 @@ class Run:
                      "stage": stage, "train_loss": train_loss, "val_loss": self.validate(stage), "time": time.time(),
                      "ema": self.ema is not None, "specular_level": self.config.specular_level}
             if des19:
-                entry["des19"] = score_des19(self.net, des19, self.config.size)
+                entry["des19"] = score_des19(self.net, des19, self.config.size, self.config.flash_context)
                 entry["des19_size"] = self.config.size
             if self.card is None:
                 self.card = (load_card() if self.des19 is None else None) or False
@@ -772,18 +772,21 @@ def score_known_lights(net, caps, size, refine_steps=DEFAULT_ITERATIONS, specula
     return {"known_lights": round(float(np.mean(plain)), 4), "known_lights_refined": round(float(np.mean(refined)), 4)}
 
 
-def score_des19(net, des19, size=None):
+def score_des19(net, des19, size=None, flash_context="jitter"):
     """The reference scorer's numbers (8-bit maps, linear albedo, adapted roughness) for the chain,
     run at ``size`` (:func:`predict`) on each input exposed as the runtime exposes it
     (:func:`export.engine.batches.runtime_gain`, as the chain is trained), its diffuse then brought
-    back to the input's own level (times the inverse gain: ``svbrdf capture``'s ``photo_level``)."""
-    from export.engine.batches import runtime_gain
+    back to the input's own level (times the inverse gain: ``svbrdf capture``'s ``photo_level``). The
+    flash at the conventions' position, or (``flash_context`` "fit", a chain trained on the runtime's
+    fit) where the runtime reads it from the input (:func:`export.engine.batches.fitted_flash`)."""
+    from export.engine.batches import fitted_flash, runtime_gain
 
     rows = {k: [] for k in ("normal", "diffuse", "roughness", "specular", "relief")}
     for name, photo, gt in des19:
-        cam, light = des19_geometry(1)
         gain = runtime_gain(photo)
-        pred = predict(net, cv.image_to_encoded(cv.image_to_linear(photo) * gain.reshape(-1, 1, 1, 1)), cam, light, size)
+        exposed = cv.image_to_encoded(cv.image_to_linear(photo) * gain.reshape(-1, 1, 1, 1))
+        cam, light = des19_geometry(1) if flash_context != "fit" else (fitted_flash(exposed),) * 2
+        pred = predict(net, exposed, cam, light, size)
         p = {k: (v[0].permute(1, 2, 0).numpy().astype(np.float64) * 255).round() / 255 for k, v in pred.items()}
         p["roughness"] = np.repeat(p["roughness"], 3, -1)
         for k in ("diffuse", "specular"):

@@ -840,3 +840,22 @@ def test_the_flash_context_can_be_the_runtimes_fit_on_the_photo(small_bank):
     assert ((jitter[:, 2] / b["light"][:, 2]).log().abs() < 0.5).all()
     with pytest.raises(ValueError):
         batches.context_flash(b["photo"], b["light"], g, "exif")
+
+
+def test_des19_is_scored_with_the_flash_the_run_trains_the_chain_with():
+    """``flash_context`` "fit": the run scores Des19 with the flash where the runtime reads it from each input,
+    as it trains the chain; else at the conventions' position. A chain that reads its context scores the two
+    differently."""
+    from export.engine.run import score_des19
+
+    g = torch.Generator().manual_seed(5)
+    photo = 0.2 + 0.1 * torch.rand(1, 3, 64, 64, generator=g)
+    y, x = torch.meshgrid(torch.linspace(-1, 1, 64), torch.linspace(-1, 1, 64), indexing="ij")
+    photo = (photo + 0.7 * torch.exp(-((x - 0.4) ** 2 + (y + 0.3) ** 2) / 0.02)).clamp(0, 1)  # a highlight off centre
+    gt = {"normal": np.full((64, 64, 3), 0.5) * np.array([1, 1, 2]), "diffuse": np.full((64, 64, 3), 0.2),
+          "roughness": np.full((64, 64, 3), 0.4), "specular": np.full((64, 64, 3), 0.04)}
+    des19 = [("one", photo, gt)]
+    net = _speaking_net()
+    at_conventions, fitted = score_des19(net, des19, 64), score_des19(net, des19, 64, "fit")
+    assert set(fitted) == set(at_conventions) and all(np.isfinite(v) for v in fitted.values())
+    assert any(abs(fitted[k] - at_conventions[k]) > 1e-4 for k in ("normal", "diffuse", "roughness", "specular"))
