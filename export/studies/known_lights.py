@@ -33,8 +33,9 @@ score on real-like held-out lights does not rest on one card:
   then the RMSE of the encoded renders against photos 1-8, lit as they were, saturated pixels left
   out; a method's maps (the floor's too) scored as the command writes them, the diffuse brought back to
   photo 0 as shot (:func:`export.engine.known_lights.score_as_shot`): relighting fits one intensity, so
-  what counts is the diffuse's level against the F0's, which the albedo convention sets. Beside the methods: the floor (:class:`export.studies.methods.Floor`) on the same input, and
-  the true maps (``truth``: what the photos' noise, tone curve and white balance leave unexplained).
+  what counts is the diffuse's level against the F0's, which the albedo convention sets. Beside the
+  methods: the floor (:class:`export.studies.methods.Floor`) on the same input, and the true maps
+  (``truth``: what the photos' noise, tone curve and white balance leave unexplained).
 
 The captures are kept in ``~/.cache/svbrdf/known_lights/<seed>_<count>.npz`` (:func:`captures`);
 a re-run only runs the methods. Prints a table and writes it as JSON with ``--json``.
@@ -127,7 +128,8 @@ def methods_to_run(names=None, extra=()):
               help="Each method without refinement and with --refine N (0: without only).")
 @click.option("--seed", default=SEED, show_default=True, help="Seed of the captures (a fresh set: another seed).")
 @click.option("--colocated", is_flag=True,
-              help="Each photo taken from its own light (the card's rig: the view moves with the light), not from photo 0's camera.")
+              help="Each photo taken from its own light (the card's rig: the view moves with the light), "
+                   "not from photo 0's camera.")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None)
 @click.option("--cache", "cache_dir", default=CACHE_DIR, show_default=True, type=click.Path(file_okay=False),
               help="Where the captures are kept between runs.")
