@@ -23,8 +23,7 @@ from export.render.brdf import render_maps
 from export.render.relight import fit_intensity
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.imageops import resize
-from svbrdf_cli.infer.exposure import (NETWORK_SIZE, auto_exposure_gain, network_input, photo_level,
-                                       to_photo_level)
+from svbrdf_cli.infer.exposure import network_gain, network_input, photo_level, to_photo_level
 from svbrdf_cli.write.mapset import stored_to_linear
 
 #: Seed of the captures (none of the bank's, the runs' validation's nor ``refine_eval``'s: see above).
@@ -170,7 +169,7 @@ def photo_input(capture):
 
 def photo_gain(capture):
     """The stops ``svbrdf capture``'s auto exposure adds to photo 0 (:func:`photo_input`'s)."""
-    return auto_exposure_gain(resize(cv.image_to_linear(encoded(capture["photos"][0])), NETWORK_SIZE))
+    return network_gain(cv.image_to_linear(encoded(capture["photos"][0])))
 
 
 def as_shot(stored, capture, specular=False):

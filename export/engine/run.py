@@ -742,10 +742,9 @@ def score_card(net, card, size, refine_steps=DEFAULT_ITERATIONS, specular=False)
     (:func:`captured_maps`, the diffuse, and with ``specular`` the F0, brought back to the photo as shot),
     lit as the 8 other photos were: ``{"card": ..., "card_refined": ...}``, the second after ``--refine
     refine_steps`` on the same maps."""
-    from svbrdf_cli.imageops import resize
-    from svbrdf_cli.infer.exposure import NETWORK_SIZE, auto_exposure_gain, photo_level, to_photo_level
+    from svbrdf_cli.infer.exposure import network_gain, photo_level, to_photo_level
 
-    level = photo_level(auto_exposure_gain(resize(cv.image_to_linear(card.photos[0]), NETWORK_SIZE)))
+    level = photo_level(network_gain(cv.image_to_linear(card.photos[0])))
     maps, refined = (to_photo_level(m, level, specular) for m in
                      captured_maps(runtime_twin(net, size), card.network_input(), refine_steps))
     return {"card": round(card.relight_rmse(maps), 4), "card_refined": round(card.relight_rmse(refined), 4)}

@@ -31,9 +31,14 @@ def auto_exposure_gain(linear, target=cv.AUTO_EXPOSURE_MEAN):
     return (lo + hi) / 2
 
 
+def network_gain(linear):
+    """The stops :func:`network_input` adds to a linear square crop by auto exposure (at :data:`NETWORK_SIZE`²)."""
+    return auto_exposure_gain(resize(linear, NETWORK_SIZE))
+
+
 def network_input(linear, gain_ev=None):
     """A linear square crop -> what the networks take: :data:`NETWORK_SIZE`², exposed by ``gain_ev``
-    stops (None: :func:`auto_exposure_gain`), encoded."""
+    stops (None: :func:`network_gain`), encoded."""
     low = resize(linear, NETWORK_SIZE)
     if gain_ev is None:
         gain_ev = auto_exposure_gain(low)
