@@ -66,6 +66,25 @@ DARK_GLOSS = (0.3, 0.9)
 GREY_SHARDS = range(188, 220)
 #: How much of its colour a grey shard's diffuse keeps at most (a factor uniform in [0, this]).
 GREY_CHROMA = 0.35
+#: Shards of metals with relief (gilding, embossed foil, hammered and cast metal: :func:`_relief_metal`), after
+#: the first 17920 materials. The procedural metals are flat plates, dark but for the flash's spot, and the
+#: chain learnt that look as a metal: on ``paper_real`` its F0 before the runtime reads it as a dielectric
+#: (``infer/swift.read_as_dielectric``) was 0.49-0.53 on two dark grey plastics and 0.038-0.044 on the gilded
+#: carvings, the bronze relief, the gold foil of a card and a gift bag, and the card's foil scales.
+RELIEF_METAL_SHARDS = range(280, 300)
+#: Families whose relief (normals) and pattern a relief-metal shard takes.
+RELIEF_FAMILIES = ("cobblestones", "scales", "leather", "bark", "tiles", "bricks", "wood", "paper", "plastic_paint",
+                   "marble")
+#: Share of a relief-metal shard that is foil over a dielectric (the two blended through a random mask).
+FOIL_SHARE = 0.5
+#: A relief metal's roughness level (uniform), the factor on its relief's tilt (log-uniform) and how much its
+#: F0 follows its family's pattern (tarnish in the crevices), either way.
+RELIEF_METAL_ROUGHNESS = (0.2, 0.7)
+RELIEF_METAL_TILT = (1.0, 2.0)
+RELIEF_METAL_TARNISH = 0.3
+#: A relief metal is one of these with this probability (gilding, brass and copper foil), else any metal.
+WARM_METALS = ("gold", "copper", "brass", "bronze")
+WARM_SHARE = 0.5
 #: Probability that a procedural material is a metal (real captures: about 12 % metals, with the CC0 sets).
 METAL_FRACTION = 0.08
 
@@ -203,6 +222,39 @@ def _grey(g, n):
     return maps, ["grey:" + x.split(":", 1)[1] for x in sources]
 
 
+def _relief_metal(g, n):
+    """``n`` metals with relief: procedural materials of :data:`RELIEF_FAMILIES` made metal (a metal's F0 of
+    :data:`export.data.procedural.METAL_F0`, one of :data:`WARM_METALS` with :data:`WARM_SHARE`, times their pattern's brightness within
+    :data:`RELIEF_METAL_TARNISH` either way, their diffuse times 0.02, their roughness's pattern at a level
+    uniform in :data:`RELIEF_METAL_ROUGHNESS`, their tilt times a factor in :data:`RELIEF_METAL_TILT`); the
+    first :data:`FOIL_SHARE` of them blended over a procedural dielectric through a random mask (foil)."""
+    m = procedural.random_materials(g, n, SIZE, device="cpu", families=RELIEF_FAMILIES)
+    names = list(procedural.METAL_F0)
+    pal = torch.tensor([procedural.METAL_F0[k] for k in names], dtype=torch.float32)
+    warm = torch.tensor([names.index(k) for k in WARM_METALS])
+    pick = torch.where(torch.rand(n, generator=g) < WARM_SHARE, warm[torch.randint(0, len(warm), (n,), generator=g)],
+                       torch.randint(0, len(pal), (n,), generator=g))
+    colour = pal[pick].reshape(n, 3, 1, 1)
+    lum = luminance(m["diffuse"])
+    pattern = (lum / lum.mean((2, 3), keepdim=True).clamp_min(1e-4)).clamp(0.0, 2.0) - 1.0
+    specular = (colour * (1.0 + RELIEF_METAL_TARNISH * pattern)).clamp(0.3, 0.98)
+    r = m["roughness"]
+    level = RELIEF_METAL_ROUGHNESS[0] + torch.rand(n, generator=g) * (RELIEF_METAL_ROUGHNESS[1] - RELIEF_METAL_ROUGHNESS[0])
+    roughness = (level.reshape(-1, 1, 1, 1) * (r / r.mean((2, 3), keepdim=True).clamp_min(1e-4)).sqrt()).clamp(0.06, 1.0)
+    k = log_uniform(g, n, *RELIEF_METAL_TILT).reshape(-1, 1, 1, 1)
+    normal = cv.normalize(torch.cat([m["normal"][:, :2] * k, m["normal"][:, 2:]], 1), axis=1)
+    maps = {"normal": normal, "diffuse": m["diffuse"] * 0.02, "roughness": roughness, "specular": specular}
+    sources = [f"relief_metal:{f}" for f in m["family"]]
+    foil = int(round(FOIL_SHARE * n))
+    if foil:
+        d = procedural.random_materials(g, foil, SIZE, device="cpu", metal_fraction=0.0)
+        over = augment.blend({k_: d[k_] for k_ in cv.MAP_NAMES}, {k_: v[:foil] for k_, v in maps.items()},
+                             _blend_masks(g, foil))
+        maps = {k_: torch.cat([over[k_], maps[k_][foil:]]) for k_ in cv.MAP_NAMES}
+        sources = [f"foil:{a.split(':', 1)[1]}+{b}" for a, b in zip(sources[:foil], d["family"])] + sources[foil:]
+    return maps, sources
+
+
 def _blend_masks(g, n):
     from export.data.dataset import blend_mask
 
@@ -233,6 +285,8 @@ def grow(root=None, target=8000, seed=0, shared=None, progress=print):
             kind = "dark"
         elif index in GREY_SHARDS:
             kind = "grey"
+        elif index in RELIEF_METAL_SHARDS:
+            kind = "relief_metal"
         elif u < CC0_FRACTION:
             if cc0_source is None:
                 cc0_source = _Cc0Source(shared)
@@ -244,6 +298,8 @@ def grow(root=None, target=8000, seed=0, shared=None, progress=print):
             drawn = _dark(g, SHARD)
         elif kind == "grey":
             drawn = _grey(g, SHARD)
+        elif kind == "relief_metal":
+            drawn = _relief_metal(g, SHARD)
         elif kind == "print":
             m = procedural.random_materials(g, SHARD, SIZE, device="cpu", families=["printed"])
             drawn = {k: m[k] for k in cv.MAP_NAMES}, [f"print:{f}" for f in m["family"]]

@@ -11,6 +11,7 @@ import pytest
 import torch
 import torch.nn.functional as F
 
+from export.data.noise import luminance
 from export.engine import bank as bank_mod
 from export.engine import batches, flash, nets
 from export.engine.run import Run, RunConfig
@@ -97,9 +98,10 @@ def test_a_bank_grown_past_its_print_shards_holds_prints_and_keeps_its_earlier_s
 
 
 def _grown_with_shard(tmp_path, monkeypatch, kind):
-    """A bank of 3 shards whose third is of ``kind`` ("dark" or "grey"): (its manifest entry, its maps,
+    """A bank of 3 shards whose third is of ``kind`` ("dark", "grey", "relief_metal"): (its manifest entry, its maps,
     the first two shards' maps)."""
-    for name, k in (("PRINT_SHARDS", "print"), ("DARK_SHARDS", "dark"), ("GREY_SHARDS", "grey")):
+    for name, k in (("PRINT_SHARDS", "print"), ("DARK_SHARDS", "dark"), ("GREY_SHARDS", "grey"),
+                    ("RELIEF_METAL_SHARDS", "relief_metal")):
         monkeypatch.setattr(bank_mod, name, range(2, 3) if k == kind else range(0))
     root = str(tmp_path / "bank")
     bank_mod.grow(root, 3 * bank_mod.SHARD, progress=None)
@@ -128,6 +130,27 @@ def test_grey_shards_hold_dark_grey_glossy_dielectrics(tmp_path, small_bank, mon
     assert float(grey["roughness"].mean()) < float(rest["roughness"].mean())
     assert float(grey["specular"].amax()) < 0.1  # dielectrics only
     assert float((grey["specular"] - grey["specular"].mean(1, keepdim=True)).abs().amax()) < 0.01  # grey F0
+
+
+def test_relief_metal_shards_hold_metals_with_relief_half_of_them_foil_over_a_dielectric(tmp_path, small_bank, monkeypatch):
+    shard, metal, rest = _grown_with_shard(tmp_path, monkeypatch, "relief_metal")
+    foil = int(round(bank_mod.FOIL_SHARE * bank_mod.SHARD))
+    assert shard["kind"] == "relief_metal"
+    assert all(x.startswith("foil:") for x in shard["sources"][:foil])
+    assert all(x.startswith("relief_metal:") for x in shard["sources"][foil:])
+
+    def tilt(n):
+        return float(n[:, :2].norm(dim=1).mean())
+
+    pure = {k: v[foil:] for k, v in metal.items()}
+    f0 = luminance(pure["specular"])
+    assert float(f0.amin()) > 0.25 and float(pure["diffuse"].amax()) < 0.03  # metal everywhere: no diffuse
+    assert tilt(pure["normal"]) > tilt(rest["normal"])
+    lum = luminance(metal["specular"][:foil]).flatten(1)
+    metal_share = (lum > 0.25).float().mean(1)
+    assert float(metal_share.amin()) < 0.9 and float(metal_share.amax()) > 0.1 and float(metal_share.mean()) > 0.2
+    warm = (pure["specular"][:, 2] < 0.8 * pure["specular"][:, 0]).float().mean((1, 2))  # gold, copper, brass, bronze
+    assert 0.25 < float((warm > 0.5).float().mean()) < 0.95
 
 
 def test_a_batch_has_what_each_stage_needs(small_bank):
