@@ -81,8 +81,11 @@ def _setup(threads):
 @click.option("--flash-context", type=click.Choice(FLASH_CONTEXTS), default=None,
               help="Where the networks' flash context comes from, from now on: the true flash jittered, or the "
                    "runtime's fit on the photo (the run keeps it).")
+@click.option("--prefetch/--no-prefetch", default=False, show_default=True,
+              help="Make the batches ahead in a child process that runs only on CPU time no other process wants "
+                   "(the same run, faster where a core idles; export/engine/prefetch.py).")
 def train(folder, threads, steps, minutes, checkpoint_minutes, eval_minutes, checkpoint, schedule, restart_stage,
-          bank_count, weight_pairs, specular_level, halve_every, flash_context):
+          bank_count, weight_pairs, specular_level, halve_every, flash_context, prefetch):
     """Train the swift chain in FOLDER, or resume it; SIGTERM/SIGINT save and exit 0."""
     import dataclasses
     import os
@@ -118,7 +121,7 @@ def train(folder, threads, steps, minutes, checkpoint_minutes, eval_minutes, che
         run.save()
     click.echo(f"run {folder}: step {run.step}, stage {run.stage}, {run.samples} samples, "
                f"{run.cpu / 3600:.2f} CPU h", err=True)
-    run.train(steps=steps, minutes=minutes)
+    run.train(steps=steps, minutes=minutes, prefetch=prefetch)
     click.echo(f"run {folder}: saved at step {run.step} ({run.samples} samples)", err=True)
 
 
@@ -171,9 +174,12 @@ def _schedule(text):
               help="Passed to train: the learning rate halves every this many samples of a stage from now on.")
 @click.option("--flash-context", type=click.Choice(FLASH_CONTEXTS), default=None,
               help="Passed to train: where the networks' flash context comes from, from now on.")
+@click.option("--prefetch/--no-prefetch", default=True, show_default=True,
+              help="Passed to train: make the batches ahead on the machine's idle CPU time.")
 def background(folder, schedule, restart_stage, bank_count, weight_pairs, specular_level, checkpoint, halve_every,
-               flash_context):
-    """Resume (or start) the run in FOLDER detached, on one core; its log is FOLDER/log.txt."""
+               flash_context, prefetch):
+    """Resume (or start) the run in FOLDER detached, on one core (and the other's idle time, making its batches
+    ahead: --prefetch); its log is FOLDER/log.txt."""
     import os
     import subprocess
     import sys
@@ -197,6 +203,7 @@ def background(folder, schedule, restart_stage, bank_count, weight_pairs, specul
         args += ["--checkpoint", checkpoint] if checkpoint else []
         args += ["--halve-every", str(halve_every)] if halve_every else []
         args += ["--flash-context", flash_context] if flash_context else []
+        args += ["--prefetch"] if prefetch else []
         p = subprocess.Popen(args,
                              stdout=log, stderr=log, stdin=subprocess.DEVNULL, start_new_session=True, env=env)
     with open(pid_file, "w") as f:

@@ -46,6 +46,9 @@ from svbrdf_cli import conventions as cv
 from svbrdf_cli.infer.refine import DEFAULT_ITERATIONS
 
 AUX_NAMES = ("I_bf", "I_hr", "I_hr2")
+#: Step ``k`` of a run seeded ``s`` draws its batch from a generator seeded ``STEP_SEEDS * (s + 1) + k``
+#: (:meth:`Run.step_batch`): above the bank's shard seeds, the validation's and the known-light captures'.
+STEP_SEEDS = 10 ** 12
 
 
 @dataclasses.dataclass
@@ -268,7 +271,6 @@ class Run:
             torch.manual_seed(c.seed)  # the initial weights are the run's, whatever the process did before
             self.net = nets.build(c.tier)
         self.net.loss_weights = dict(c.weights)
-        self.g = torch.Generator().manual_seed(c.seed)
         self.step, self.stage_index, self.stage_samples, self.samples, self.cpu = 0, 0, 0, 0, 0.0
         self.started = None
         self.ema = None
@@ -276,7 +278,6 @@ class Run:
             own = self.net.state_dict()
             own.update(state["model"])  # a compact checkpoint leaves out the stages not trained yet
             self.net.load_state_dict(own)
-            self.g.set_state(state["generator"])
             self.step, self.stage_index = state["step"], state["stage_index"]
             self.stage_samples, self.samples, self.cpu = state["stage_samples"], state["samples"], state["cpu"]
             if state.get("ema"):
@@ -305,7 +306,7 @@ class Run:
 
     def state(self):
         return {"model": self.net.state_dict(), "optimizer": self.optimizer.state_dict() if self.optimizer else None,
-                "generator": self.g.get_state(), "step": self.step, "stage_index": self.stage_index,
+                "step": self.step, "stage_index": self.stage_index,
                 "stage_samples": self.stage_samples, "samples": self.samples, "cpu": self.cpu,
                 "config": dataclasses.asdict(self.config), "ema": self.ema}
 
@@ -381,24 +382,34 @@ class Run:
                 self.log(f"real photos: {len(self.real)} in the training pool")
         return self.real
 
-    def train_step(self):
-        """One step of the current stage; returns its loss."""
+    def step_batch(self, step, stage):
+        """What step ``step`` of ``stage`` trains on: ``("real", photos)``, a self-supervised batch of real
+        photos (:data:`RunConfig.real_fraction` of the maps stage's steps), else ``("synthetic", batch)``;
+        drawn from a generator seeded by the run's seed and the step alone, so that any process makes the
+        same (:mod:`export.engine.prefetch`)."""
         c = self.config
-        bank = self.load_bank()
+        g = torch.Generator().manual_seed(STEP_SEEDS * (c.seed + 1) + step)
+        real = stage == "maps" and c.real_fraction > 0 and float(torch.rand(1, generator=g)) < c.real_fraction
+        if real and self.load_real():
+            return "real", self.real.batch(g, c.batch, c.size)
+        b = batches.make(self.load_bank(), g, c.batch, c.size, stage, specular_level=c.specular_level,
+                         flash_context=c.flash_context)
+        if stage == "maps" and dict(c.weights).get("render"):
+            b["lights"], b["cameras"] = render_views(g, c.batch)
+        return "synthetic", b
+
+    def train_step(self, made=None):
+        """One step of the current stage (on ``made``, its :meth:`step_batch` if another process made it);
+        returns its loss."""
+        c = self.config
         t0 = time.process_time()
-        real = self.stage == "maps" and c.real_fraction > 0 and float(torch.rand(1, generator=self.g)) < c.real_fraction
-        if real and not self.load_real():
-            real = False
+        kind, b = made if made is not None else self.step_batch(self.step, self.stage)
         self.net.train()
         for group in self.optimizer.param_groups:
             group["lr"] = self._lr()
-        if real:
-            loss = c.real_weight * real_loss(self.net, self.real.batch(self.g, c.batch, c.size))
+        if kind == "real":
+            loss = c.real_weight * real_loss(self.net, b)
         else:
-            b = batches.make(bank, self.g, c.batch, c.size, self.stage, specular_level=c.specular_level,
-                             flash_context=c.flash_context)
-            if self.stage == "maps" and dict(c.weights).get("render"):
-                b["lights"], b["cameras"] = render_views(self.g, c.batch)
             loss = stage_loss(self.net, self.stage, b)
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
@@ -461,15 +472,47 @@ class Run:
     def request_stop(self, *_):
         self.stop_requested = True
 
-    def train(self, steps=None, minutes=None, evaluate=True):
+    def train(self, steps=None, minutes=None, evaluate=True, prefetch=False):
         """Train until the schedule ends, ``steps`` more steps, ``minutes`` of wall time or a signal;
-        checkpoints as configured; returns the number of steps taken."""
+        checkpoints as configured; returns the number of steps taken. ``prefetch``: the batches are made
+        ahead on the machine's idle CPU time too (:mod:`export.engine.prefetch`; the same run)."""
         old = {s: signal.signal(s, self.request_stop) for s in (signal.SIGTERM, signal.SIGINT)}
+        self.prefetch, self.prefetched = prefetch, 0
         try:
             return self._train(steps, minutes, evaluate)
         finally:
+            self._close_prefetcher()
             for s, h in old.items():
                 signal.signal(s, h)
+
+    def _made(self):
+        """The current step's batch if a prefetching child made it (started, or restarted at a new stage,
+        here: it forks the run with its bank loaded), else None."""
+        if not getattr(self, "prefetch", False):
+            return None
+        p = getattr(self, "prefetcher", None)
+        if p is not None and p.stage != self.stage:
+            self._close_prefetcher()
+            p = None
+        if p is None:
+            from export.engine.prefetch import Prefetcher
+
+            self.load_bank()
+            if self.stage == "maps":
+                self.load_real()
+            self.prefetcher = Prefetcher(self.step_batch, self.stage, self.step + 1)
+            return None
+        made = p.take(self.step)
+        self.cpu += p.spent()
+        self.prefetched += made is not None
+        return made
+
+    def _close_prefetcher(self):
+        p = getattr(self, "prefetcher", None)
+        if p is not None:
+            p.close()
+            self.cpu += p.spent()
+            self.prefetcher = None
 
     def _train(self, steps, minutes, evaluate):
         c = self.config
@@ -481,7 +524,7 @@ class Run:
                 break
             if minutes is not None and time.time() - start > minutes * 60:
                 break
-            running.append(self.train_step())
+            running.append(self.train_step(self._made()))
             taken += 1
             if time.time() - last_save > c.checkpoint_minutes * 60:
                 self.save()

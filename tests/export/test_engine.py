@@ -321,6 +321,48 @@ def test_a_run_stopped_and_resumed_equals_the_run_that_never_stopped(tmp_path, s
     assert not all(torch.equal(a[k], nets.build().state_dict()[k]) for k in a)  # it did train
 
 
+def test_a_run_whose_batches_a_child_makes_ahead_is_the_same_run(tmp_path, small_bank, monkeypatch):
+    import time
+
+    from export.engine import prefetch
+
+    torch.manual_seed(0)
+    alone = _run(tmp_path / "alone", small_bank)
+    alone.train(steps=8, evaluate=False)  # crosses two stage boundaries: the child starts again at each
+    monkeypatch.setattr(prefetch, "_idle_priority", lambda: None)  # a busy test machine leaves no idle time
+    step = Run.train_step
+    monkeypatch.setattr(Run, "train_step", lambda self, made=None: (time.sleep(1.0), step(self, made))[1])
+    helped = _run(tmp_path / "helped", small_bank)
+    helped.train(steps=8, evaluate=False, prefetch=True)
+    assert helped.prefetched >= 2  # steps trained on the child's batches
+    assert helped.step == alone.step == 7
+    a, b = alone.net.state_dict(), helped.net.state_dict()
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    assert helped.cpu > 0 and helped.prefetcher is None
+
+
+def test_the_prefetcher_hands_over_each_step_once_skips_ahead_and_stops(tmp_path):
+    import time
+
+    from export.engine.prefetch import Prefetcher
+
+    p = Prefetcher(lambda step, stage: (stage, step * 10), "maps", first=5)
+
+    def wait_for(k):
+        return p.take(k, wait=60)
+
+    try:
+        assert wait_for(5) == ("maps", 50)
+        assert p.take(5) is None  # handed over once
+        time.sleep(0.5)  # the child has made 6 and 7 and waits
+        assert p.take(40) is None  # not made: the trainer makes it itself, the child skips to 41
+        assert wait_for(41) == ("maps", 410)
+        assert p.spent() >= 0.0
+    finally:
+        p.close()
+    assert not p.process.is_alive()
+
+
 def test_a_finished_stage_keeps_its_averaged_weights_and_evaluation_sees_them(tmp_path, small_bank):
     import dataclasses
 
