@@ -3,7 +3,8 @@
 A run is a folder:
 
 * ``state.pt``: every stage's weights, the optimiser of the stage in training, the step, the
-  samples seen, the CPU seconds spent, the data generator's state and the run's configuration;
+  samples seen, the CPU seconds spent and the run's configuration (each step's batch comes from a
+  generator seeded by the step: :meth:`Run.step_batch`);
   written every ``checkpoint_minutes`` of wall time and when the process gets SIGTERM or SIGINT
   (it finishes the step, saves, and exits 0);
 * ``curve.jsonl``: one line per evaluation (samples seen, CPU hours, stage, the running training
@@ -322,7 +323,7 @@ class Run:
 
     def save_compact(self, out):
         """The run's state as files under 25 MB in ``out`` (weights of the stages trained so far, the
-        optimiser, the generator and counters; the later stages' weights are their seeded start),
+        optimiser and counters; the later stages' weights are their seeded start),
         with its curve: what a session commits so the next one resumes exactly."""
         state = self.state()
         done = {s for s, _ in self.config.schedule[:self.stage_index + 1]}
@@ -519,6 +520,7 @@ class Run:
         start = time.time()
         last_save = last_eval = time.time()
         taken, running = 0, []
+        last_line, helped_before = time.time(), 0
         while self.stage is not None and not self.stop_requested:
             if steps is not None and taken >= steps:
                 break
@@ -536,8 +538,12 @@ class Run:
                 self.save()
                 last_save = time.time()
             if taken % 50 == 0:
+                now = time.time()
+                helped = f", {self.prefetched - helped_before} of 50 batches made ahead" if self.prefetch else ""
                 self.log(f"step {self.step} stage {self.stage} samples {self.samples} "
-                         f"loss {np.mean(running[-50:]):.4f} cpu {self.cpu / 3600:.2f} h")
+                         f"loss {np.mean(running[-50:]):.4f} cpu {self.cpu / 3600:.2f} h "
+                         f"({50 * c.batch / max(now - last_line, 1e-9):.1f} samples/s{helped})")
+                last_line, helped_before = now, self.prefetched
         self.save()
         if evaluate and running:
             self.record(float(np.mean(running)))
