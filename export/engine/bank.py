@@ -195,13 +195,18 @@ def log_uniform(g, n, low, high):
     return torch.exp(math.log(low) + torch.rand(n, generator=g) * math.log(high / low))
 
 
+def uniform(g, n, low, high):
+    """(n,) factors drawn uniformly in [low, high] from ``g``."""
+    return low + torch.rand(n, generator=g) * (high - low)
+
+
 def _dark(g, n):
     """``n`` dark glossy dielectrics: procedural materials of :data:`DARK_FAMILIES` (F0 at most 0.08) with
     the diffuse times a factor log-uniform in :data:`DARK_ALBEDO` and the roughness times one uniform in
     :data:`DARK_GLOSS`."""
     m = procedural.random_materials(g, n, SIZE, device="cpu", families=DARK_FAMILIES)
     k = log_uniform(g, n, *DARK_ALBEDO)
-    r = DARK_GLOSS[0] + torch.rand(n, generator=g) * (DARK_GLOSS[1] - DARK_GLOSS[0])
+    r = uniform(g, n, *DARK_GLOSS)
     maps = {k_: m[k_] for k_ in cv.MAP_NAMES}
     maps["diffuse"] = maps["diffuse"] * k.reshape(-1, 1, 1, 1)
     maps["roughness"] = (maps["roughness"] * r.reshape(-1, 1, 1, 1)).clamp(0.04, 1.0)
@@ -239,7 +244,7 @@ def _relief_metal(g, n):
     pattern = (lum / lum.mean((2, 3), keepdim=True).clamp_min(1e-4)).clamp(0.0, 2.0) - 1.0
     specular = (colour * (1.0 + RELIEF_METAL_TARNISH * pattern)).clamp(0.3, 0.98)
     r = m["roughness"]
-    level = RELIEF_METAL_ROUGHNESS[0] + torch.rand(n, generator=g) * (RELIEF_METAL_ROUGHNESS[1] - RELIEF_METAL_ROUGHNESS[0])
+    level = uniform(g, n, *RELIEF_METAL_ROUGHNESS)
     roughness = (level.reshape(-1, 1, 1, 1) * (r / r.mean((2, 3), keepdim=True).clamp_min(1e-4)).sqrt()).clamp(0.06, 1.0)
     k = log_uniform(g, n, *RELIEF_METAL_TILT).reshape(-1, 1, 1, 1)
     normal = cv.normalize(torch.cat([m["normal"][:, :2] * k, m["normal"][:, 2:]], 1), axis=1)

@@ -288,6 +288,7 @@ class Run:
             self.optimizer.load_state_dict(state["optimizer"])
         self.bank = None
         self.real = None
+        self.prefetch, self.prefetcher, self.prefetched = False, None, 0
         self.des19 = des19
         self.card = None
         self.known_lights = None
@@ -489,9 +490,9 @@ class Run:
     def _made(self):
         """The current step's batch if a prefetching child made it (started, or restarted at a new stage,
         here: it forks the run with its bank loaded), else None."""
-        if not getattr(self, "prefetch", False):
+        if not self.prefetch:
             return None
-        p = getattr(self, "prefetcher", None)
+        p = self.prefetcher
         if p is not None and p.stage != self.stage:
             self._close_prefetcher()
             p = None
@@ -509,7 +510,7 @@ class Run:
         return made
 
     def _close_prefetcher(self):
-        p = getattr(self, "prefetcher", None)
+        p = self.prefetcher
         if p is not None:
             p.close()
             self.cpu += p.spent()
