@@ -725,8 +725,9 @@ def predict(net, photo, camera, light, size=None):
     """Stored maps (B, C, H, W) of the whole chain for encoded photos (B, 3, H, W).
 
     ``size``: run the chain on the photo area-shrunk to ``size``² (the scale it was trained at) and
-    bring its maps back bicubically (normals renormalised), as :class:`svbrdf_cli.infer.swift.SwiftModel`
-    does; None runs it at the photo's size."""
+    bring its maps back bicubically (normals renormalised; :class:`svbrdf_cli.infer.swift.SwiftModel`
+    brings the normals and the diffuse back with the photo's detail, :func:`svbrdf_cli.infer.swift.to_photo_size`,
+    and the run's curve keeps bicubic to stay comparable along it); None runs it at the photo's size."""
     net.eval()
     h = photo.shape[-1]
     small = F.interpolate(photo, size=(size, size), mode="area") if size and size < h else photo

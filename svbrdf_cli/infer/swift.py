@@ -7,12 +7,12 @@ and ``maps`` (stored encoding, the correction of the base already applied). Its 
 training run's provenance.
 
 **Scale.** A chain runs at the image size its run trained at (``run_size`` in its metadata, 128):
-a larger photo is area-shrunk to it and the maps come back to the photo's size bicubically, the
-normals renormalised. The chain learned the flash spot's and the texture's size in pixels at that
-scale; run on Des19 at 256 instead, the run's chain at 987k samples scored normal / diffuse /
-roughness / specular 0.0571 / 0.0489 / 0.2151 / 0.0742 (relief 0.276), at 128 0.0545 / 0.0406 /
-0.1322 / 0.0595 (relief 0.302) (``docs/training.md``). Guided upsampling of that step (the photo's
-detail added) was measured worse on diffuse (0.0445) for a relief 0.01 higher, so it is bicubic.
+a larger photo is area-shrunk to it and the maps come back to the photo's size with the photo's own
+detail in the normals and the diffuse (:func:`to_photo_size`), the normals renormalised. The chain
+learned the flash spot's and the texture's size in pixels at that scale; run on Des19 at 256 instead,
+the run's chain at 987k samples scored normal / diffuse / roughness / specular 0.0571 / 0.0489 /
+0.2151 / 0.0742 (relief 0.276), at 128 0.0545 / 0.0406 / 0.1322 / 0.0595 (relief 0.302)
+(``docs/training.md``).
 
 Where the flash was comes from the physical estimate's fit of the photo (the foot of the flash and
 its height, :func:`svbrdf_cli.infer.physical.fit_flash`), as the training's flash context comes from
@@ -36,6 +36,7 @@ from svbrdf_cli.imageops import shrink_longest, soft_classes
 from svbrdf_cli.infer import flash_fields, tta
 from svbrdf_cli.infer.chain import SWIFT_FILE as FILE
 from svbrdf_cli.infer.chain import ModelError, padding, session
+from svbrdf_cli.infer.upsample import GUIDED_MAPS, guided_upsample
 OUTPUTS = {"masks": ("M_b", "M_h"), "aux": ("I_bf", "I_hr", "I_hr2")}
 
 
@@ -378,6 +379,52 @@ def _unit_normals(n):
     return cv.encode_normals(cv.normalize(n)).astype(np.float32)
 
 
+#: The maps :func:`to_photo_size` brings from the chain's run size to the photo's with the photo's own detail
+#: (:func:`svbrdf_cli.infer.upsample.guided_upsample`, as the capture brings every model's maps to the output
+#: size); the others are bicubic. The chain runs at 128 px and the photo it reads is 256 px: bicubic, its
+#: diffuse held about a third of the true albedo's fine detail on the generated known-light captures, and a
+#: speckled granite relit at 0.158 against the floor's 0.094. Measured with the installed chain through
+#: ``svbrdf capture`` (``capture_eval --all-card``: Des19 normal, relief, diffuse; the card from photo 00 and
+#: from each of its 9 photos) and on the 48 generated known-light captures (``known_lights``):
+#:
+#: ====================  ======  =====  ======  ======  ======  ======
+#: guided                normal  relief diffuse card    card 9  known
+#: ====================  ======  =====  ======  ======  ======  ======
+#: none                  0.0478  0.422  0.0308  0.1199  0.1423  0.0652
+#: diffuse               0.0478  0.421  0.0311  0.1200  0.1426  0.0614
+#: normal and diffuse    0.0476  0.426  0.0311  0.1201  0.1428  0.0601
+#: ====================  ======  =====  ======  ======  ======  ======
+#:
+#: Roughness and specular unchanged. The photo's detail costs Des19's diffuse a little (its foam, gold flake
+#: and leathers show relief and glints there, not albedo) and the card's clipped flash spot keeps less of the
+#: ring's fine detail (0.51 -> 0.48: the ring gains the photo's detail, the clipped spot has none to gain).
+GUIDED = GUIDED_MAPS
+
+
+def to_photo_size(maps, small, photo):
+    """The chain's ``maps`` (stored encoding, at the size of ``small``, the encoded photo it read) at the
+    size of the encoded ``photo``: :data:`GUIDED` by the photo's luminance (a square photo), the others
+    and any map of a photo that is not square bicubic; clipped to [0, 1], float32."""
+    import cv2
+
+    from svbrdf_cli.imageops import luminance
+
+    full, low = photo.shape[:2], small.shape[:2]
+    if low == full:
+        return {n: np.ascontiguousarray(v, np.float32).reshape(full + (-1,)) for n, v in maps.items()}
+    square = full[0] == full[1] and low[0] == low[1]
+    guide = (luminance(small), luminance(photo)) if square else None
+    out = {}
+    for n, v in maps.items():
+        v = np.ascontiguousarray(v, np.float32)
+        if guide is not None and n in GUIDED:
+            up = guided_upsample(v, *guide)
+        else:
+            up = cv2.resize(v, (full[1], full[0]), interpolation=cv2.INTER_CUBIC)
+        out[n] = np.clip(up, 0.0, 1.0).astype(np.float32).reshape(full + (-1,))
+    return out
+
+
 def is_swift(folder):
     """Whether ``folder`` holds a swift chain (else a folder of per-stage networks)."""
     return os.path.isfile(os.path.join(folder, FILE))
@@ -485,12 +532,12 @@ class SwiftModel:
     def run_at(self, img, light, size, names=None):
         """The chain's outputs for the encoded photo ``img`` with its flash at ``light``, run with the
         photo area-shrunk to ``size`` (None or larger than the photo: as it is) on :data:`PASSES`,
-        brought back to the photo's size: the maps of ``names`` only, or every map and the masks and
+        brought back to the photo's size (:func:`to_photo_size`): the maps of ``names`` only, or every map and the masks and
         auxiliary renderings (None)."""
         import cv2
 
         full = img.shape[:2]
-        img = shrink_longest(img, size)
+        photo, img = img, shrink_longest(img, size)
         h, w = img.shape[:2]
         m, pad, mode = padding(h, w, self.multiple, MARGIN)
 
@@ -510,18 +557,15 @@ class SwiftModel:
             total = res if total is None else {n: total[n] + res[n] for n in total}
         mean = {n: v / np.float32(len(self.passes)) for n, v in total.items()}
 
-        def full_size(x, interpolation=cv2.INTER_CUBIC):
-            x = np.ascontiguousarray(x, dtype=np.float32)
-            if (h, w) != full:
-                x = np.clip(cv2.resize(x, (full[1], full[0]), interpolation=interpolation), 0.0, 1.0)
-            return x.reshape(full + (-1,))
-
-        out = {n: full_size(mean[n]) for n in (names or cv.MAP_NAMES)}
+        out = to_photo_size({n: mean[n] for n in (names or cv.MAP_NAMES)}, img, photo)
         if "normal" in out and ((h, w) != full or len(self.passes) > 1):  # resized or averaged: unit vectors again
             out["normal"] = _unit_normals(cv.decode_normals(out["normal"]))
         if names:
             return out
-        extra = full_size(mean["extra"], cv2.INTER_LINEAR)
+        extra = np.ascontiguousarray(mean["extra"], np.float32)
+        if (h, w) != full:
+            extra = np.clip(cv2.resize(extra, (full[1], full[0]), interpolation=cv2.INTER_LINEAR), 0.0, 1.0)
+        extra = extra.reshape(full + (-1,))
         names = OUTPUTS["masks"] + OUTPUTS["aux"]
         out.update({name: extra[..., 3 * i:3 * i + 3] for i, name in enumerate(names)})
         return out
