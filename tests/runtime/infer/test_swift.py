@@ -119,6 +119,34 @@ def test_the_diffuse_under_the_chains_highlight_mask_is_filled_too():
     assert np.abs(out[rho > 0.4] - albedo[rho > 0.4]).max() < 1e-2
 
 
+def test_white_albedo_the_camera_clipped_away_from_the_chains_highlight_is_kept():
+    """A honeycomb's white grout clipped round the flash with no highlight on it (the chain's ``M_h`` near 0)
+    is the albedo at least as bright as the clip level: kept, not filled from the darker tiles; the same
+    clip under the chain's highlight is filled."""
+    from svbrdf_cli.infer.swift import CLIPPED_NEAR_HIGHLIGHT, fill_highlight, hidden_by_highlight
+
+    n = 128
+    y, x = np.mgrid[0:n, 0:n]
+    grout = ((x % 16) < 3) | ((y % 16) < 3)
+    rho = _rho(n, foot=(0.0, 0.0))
+    albedo = np.where(grout[..., None], 0.9, 0.05) * np.ones(3)
+    photo = np.clip(albedo ** (1 / 2.2) * (1.4 - rho[..., None]), 0, 1)  # the grout clips near the flash
+    clipped_grout = grout & (photo.min(-1) >= 1.0)
+    assert clipped_grout.sum() > 200
+    stored = cv.albedo_to_stored(albedo).astype(np.float32)
+    none = np.zeros((n, n, 3))
+    hidden, clipped = hidden_by_highlight(photo, none)
+    assert not hidden.any() and not clipped.any()
+    assert np.array_equal(fill_highlight(stored, photo, none), stored)
+    # without the chain's mask, and under a highlight it reads, the clip hides the albedo
+    assert hidden_by_highlight(photo)[1][clipped_grout].all()
+    lit = np.where((rho < 0.5)[..., None], 2 * CLIPPED_NEAR_HIGHLIGHT, 0.0) * np.ones(3)
+    hidden, clipped = hidden_by_highlight(photo, lit)
+    assert clipped[clipped_grout].all()
+    filled = cv.albedo_to_linear(fill_highlight(stored, photo, lit))
+    assert filled[clipped_grout].mean() < 0.5
+
+
 def test_a_highlight_mask_over_most_of_the_image_fills_nothing():
     from svbrdf_cli.infer.swift import MAX_MASK_SHARE, fill_highlight
 
