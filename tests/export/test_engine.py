@@ -596,7 +596,7 @@ def test_the_runtime_runs_the_exported_chain_as_torch_does(tmp_path):
     from export.engine import onnx as engine_onnx
     from svbrdf_cli.cli.main import cli
     from svbrdf_cli.infer.chain import padding
-    from svbrdf_cli.infer.swift import MARGIN
+    from svbrdf_cli.infer.swift import MARGIN, to_photo_size
     from svbrdf_cli.infer.registry import load_model
 
     net = _speaking_net()
@@ -663,14 +663,15 @@ def test_the_runtime_averages_the_photo_and_its_half_turn(tmp_path):
 
 
 def test_the_runtime_runs_the_chain_at_the_size_it_trained_at(tmp_path):
-    """A photo larger than the run's image size is shrunk to it, and the maps come back to the photo's size."""
+    """A photo larger than the run's image size is shrunk to it, and the maps come back to the photo's size:
+    roughness and specular bicubic, the diffuse with the photo's detail (``to_photo_size``)."""
     pytest.importorskip("onnxruntime")
     import cv2
 
     from export.engine import onnx as engine_onnx
     from svbrdf_cli.imageops import shrink_to
     from svbrdf_cli.infer.chain import padding
-    from svbrdf_cli.infer.swift import MARGIN
+    from svbrdf_cli.infer.swift import MARGIN, to_photo_size
     from svbrdf_cli.infer.registry import load_model
 
     net = _speaking_net()
@@ -694,8 +695,11 @@ def test_the_runtime_runs_the_chain_at_the_size_it_trained_at(tmp_path):
     with torch.no_grad():
         _, _, maps = net(padded(photo), padded(flash.context(light, light, 64)), padded(flash.base(photo, light, light)))
     for k in ("diffuse", "roughness", "specular"):
-        low = maps[k][0].permute(1, 2, 0).numpy()[m:m + 64, m:m + 64]
-        want = np.clip(cv2.resize(np.ascontiguousarray(low), (128, 128), interpolation=cv2.INTER_CUBIC), 0, 1)
+        low = np.ascontiguousarray(maps[k][0].permute(1, 2, 0).numpy()[m:m + 64, m:m + 64])
+        if k == "diffuse":
+            want = to_photo_size({k: low}, small, img)[k]
+        else:
+            want = np.clip(cv2.resize(low, (128, 128), interpolation=cv2.INTER_CUBIC), 0, 1)
         assert np.abs(out[k] - want.reshape(out[k].shape)).max() < 1e-3, k
     n = out["normal"] * 2 - 1
     assert np.allclose(np.linalg.norm(n, axis=-1), 1.0, atol=1e-4)
