@@ -596,7 +596,7 @@ def test_the_runtime_runs_the_exported_chain_as_torch_does(tmp_path):
     from export.engine import onnx as engine_onnx
     from svbrdf_cli.cli.main import cli
     from svbrdf_cli.infer.chain import padding
-    from svbrdf_cli.infer.swift import MARGIN, to_photo_size
+    from svbrdf_cli.infer.swift import MARGIN
     from svbrdf_cli.infer.registry import load_model
 
     net = _speaking_net()
