@@ -36,7 +36,7 @@ from svbrdf_cli.imageops import shrink_longest, soft_classes
 from svbrdf_cli.infer import flash_fields, tta
 from svbrdf_cli.infer.chain import SWIFT_FILE as FILE
 from svbrdf_cli.infer.chain import ModelError, padding, session
-from svbrdf_cli.infer.upsample import GUIDED_MAPS, guided_upsample
+from svbrdf_cli.infer.upsample import GUIDED_MAPS, guide_detail, guided_upsample
 OUTPUTS = {"masks": ("M_b", "M_h"), "aux": ("I_bf", "I_hr", "I_hr2")}
 
 
@@ -430,12 +430,15 @@ def to_photo_size(maps, small, photo):
     if low == full:
         return {n: np.ascontiguousarray(v, np.float32).reshape(full + (-1,)) for n, v in maps.items()}
     square = full[0] == full[1] and low[0] == low[1]
-    guide = (luminance(small), luminance(photo)) if square else None
+    guide = None
+    if square and any(n in GUIDED for n in maps):
+        g_low, g_high = luminance(small), luminance(photo)
+        guide = (g_low, g_high, guide_detail(g_low, g_high))  # once for every guided map
     out = {}
     for n, v in maps.items():
         v = np.ascontiguousarray(v, np.float32)
         if guide is not None and n in GUIDED:
-            up = guided_upsample(v, *guide)
+            up = guided_upsample(v, guide[0], guide[1], detail=guide[2])
         else:
             up = cv2.resize(v, (full[1], full[0]), interpolation=cv2.INTER_CUBIC)
         out[n] = np.clip(up, 0.0, 1.0).astype(np.float32).reshape(full + (-1,))
