@@ -195,6 +195,28 @@ def rings(rho, count):
     return np.clip(np.digitize(rho.ravel(), edges) - 1, 0, count - 1), 0.5 * (edges[:-1] + edges[1:])
 
 
+def chroma_classes(diffuse_lin, k, apart, every=7, attempts=2):
+    """(H*W,) int class of each pixel of the linear ``diffuse_lin`` by its chromaticity alone (its log colour
+    less the mean of its three channels, which a change of brightness leaves as it is): k-means (on every
+    ``every``-th pixel, ``attempts`` restarts, seeded), a centre closer than ``apart`` (log units) to an
+    earlier one joining that one's class; None when that leaves one class."""
+    import cv2
+
+    f = np.log(np.maximum(diffuse_lin, 1e-3)).reshape(-1, 3).astype(np.float32)
+    f -= f.mean(1, keepdims=True)
+    crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 1e-3)
+    cv2.setRNGSeed(0)
+    _, _, centres = cv2.kmeans(f[::every], k, None, crit, attempts, cv2.KMEANS_PP_CENTERS)
+    joined = np.arange(k)
+    for i in range(1, k):
+        near = np.flatnonzero(np.linalg.norm(centres[:i] - centres[i], axis=1) < apart)
+        if near.size:
+            joined[i] = joined[near[0]]
+    nearest = ((f[:, None, :] - centres[None]) ** 2).sum(-1).argmin(1)
+    kept, classes = np.unique(joined[nearest], return_inverse=True)
+    return classes if kept.size > 1 else None
+
+
 def soft_classes(diffuse_lin, k, every=7, attempts=2):
     """(H*W, k) soft assignment of each pixel of the linear ``diffuse_lin`` to ``k`` classes of its log
     colour: k-means (on every ``every``-th pixel, ``attempts`` restarts, seeded), each pixel weighted by

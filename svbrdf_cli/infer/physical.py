@@ -267,7 +267,7 @@ def fit_lobe(lum, clipped, rho, geo):
     return Lobe(r, float(c0[i]), float(c1[i]), h, 1.0 - res / max(res_flat, 1e-20))
 
 
-def flatten_radial(diffuse, rho, rings=PROFILE_RINGS // 2, weights=None):
+def flatten_radial(diffuse, rho, rings=PROFILE_RINGS // 2, weights=None, classes=None):
     """Divide out what is left of the flash in the diffuse: its log-brightness as a function of the
     distance to the foot (each ring's trimmed mean, :data:`RING_QUANTILES`), smoothed, relative to the
     whole image's.
@@ -278,27 +278,67 @@ def flatten_radial(diffuse, rho, rings=PROFILE_RINGS // 2, weights=None):
 
     ``weights`` (H, W) in [0, 1], when given, restrict both the trend and its removal to a class of
     pixels (in proportion): e.g. the greys, whose highlight was taken off by the lobe's share.
+
+    ``classes`` (H*W,) int, when given (:func:`svbrdf_cli.imageops.chroma_classes`): the trend is fitted to
+    each class's ring levels at once, with a level of each class's own (:func:`_class_trend`), so that a
+    class which covers more of the rings near the foot than far from it (a pale grout line through the
+    flash spot) is not read as a trend.
     """
     logl = np.log(np.maximum(luminance(diffuse), 1e-5)).ravel().astype(np.float64)
     ring, centres = imageops.rings(rho, rings)
     wt = np.ones(logl.shape) if weights is None else np.asarray(weights, np.float64).ravel()
-    n = np.bincount(ring, weights=wt, minlength=rings)
-    if weights is not None:
-        n = np.where(n >= 4.0, n, 0.0)  # a ring with a few such pixels says nothing
-    mean = _ring_midmeans(logl, ring, wt, rings)
-    mean = np.where(n > 0, mean, np.nan)
-    valid = ~np.isnan(mean)
-    if valid.sum() < 3:
-        return diffuse
-    mean = np.interp(centres, centres[valid], mean[valid])
-    # a smooth trend only: ring-to-ring changes are the material's own (a sign, a tile)
-    t = centres / max(float(centres[-1]), 1e-6)
-    smooth = np.polyval(np.polyfit(t, mean, RADIAL_DEGREE, w=np.sqrt(np.maximum(n, 0.0))), t)
+    fitted = None if classes is None else _class_trend(logl, ring, wt, centres, classes)
+    if fitted is None:
+        n = np.bincount(ring, weights=wt, minlength=rings)
+        if weights is not None:
+            n = np.where(n >= RING_MIN, n, 0.0)  # a ring with a few such pixels says nothing
+        mean = _ring_midmeans(logl, ring, wt, rings)
+        mean = np.where(n > 0, mean, np.nan)
+        valid = ~np.isnan(mean)
+        if valid.sum() < 3:
+            return diffuse
+        mean = np.interp(centres, centres[valid], mean[valid])
+        # a smooth trend only: ring-to-ring changes are the material's own (a sign, a tile)
+        t = centres / max(float(centres[-1]), 1e-6)
+        smooth = np.polyval(np.polyfit(t, mean, RADIAL_DEGREE, w=np.sqrt(np.maximum(n, 0.0))), t)
+    else:
+        smooth, n = fitted
     level = float((n * smooth).sum() / n.sum())
     trend = np.interp(rho.ravel(), centres, smooth - level).reshape(rho.shape)
     if weights is not None:
         trend = trend * weights
     return (diffuse * np.exp(-trend)[..., None]).astype(np.float32)
+
+
+#: :func:`flatten_radial`: a ring of a class (or of the pixels ``weights`` picks) counts in the trend's fit
+#: only with at least this weight of pixels in it.
+RING_MIN = 4.0
+
+
+def _class_trend(logl, ring, wt, centres, classes):
+    """(the smooth trend at the ring ``centres`` less any constant, each ring's weight), or None with too few
+    rings to fit it (:func:`flatten_radial` then fits one level for all): the polynomial of
+    :data:`RADIAL_DEGREE` in the distance, without its constant, plus one level per class, fitted by weighted
+    least squares to each class's ring levels (:func:`_ring_midmeans` of ``logl`` within the class, weighted
+    by its pixels, :data:`RING_MIN` at least), so that what differs between the classes is their own."""
+    count = centres.size
+    t = centres / max(float(centres[-1]), 1e-6)
+    powers = t[:, None] ** np.arange(1, RADIAL_DEGREE + 1)
+    k = int(classes.max()) + 1
+    rows, levels, n_fit = [], [], []
+    for c in range(k):
+        m = classes == c
+        n = np.bincount(ring[m], weights=wt[m], minlength=count)
+        mean = _ring_midmeans(logl[m], ring[m], wt[m], count)
+        for r in np.flatnonzero(n >= RING_MIN):
+            rows.append(np.concatenate([np.eye(k)[c], powers[r]]))
+            levels.append(mean[r])
+            n_fit.append(n[r])
+    if len(rows) < k + RADIAL_DEGREE + 1:
+        return None
+    w = np.sqrt(np.asarray(n_fit))
+    coef = np.linalg.lstsq(np.asarray(rows) * w[:, None], np.asarray(levels) * w, rcond=None)[0]
+    return powers @ coef[k:], np.bincount(ring, weights=wt, minlength=count)
 
 
 def _ring_midmeans(values, ring, weights, count):

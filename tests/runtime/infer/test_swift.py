@@ -62,6 +62,45 @@ def test_maps_without_a_flash_trend_are_kept():
     assert np.abs(out["roughness"] - 0.45).max() < 1e-4
 
 
+def test_a_pale_line_of_another_colour_through_the_flash_spot_is_not_read_as_the_flashs_trend():
+    """Blue tiles with a pale yellow grout line through the flash's foot: the line covers more of the rings
+    near the foot than far from it. Read from all the pixels at once, that was a trend, and dividing it
+    out darkened the tiles and the grout round the flash (``paper_real`` IMG_6830); with a level for each
+    colour, the maps are kept. A pale spot the chain left on both colours is still taken off."""
+    rho = _rho(foot=(0.0, 0.0))
+    n = rho.shape[0]
+    g = np.random.default_rng(5)
+    x = (np.arange(n) + 0.5) / n * 2 - 1
+    grout = np.broadcast_to(np.abs(x) < 0.08, rho.shape)
+    colour = np.where(grout[..., None], np.float32([0.7, 0.6, 0.3]), np.float32([0.08, 0.1, 0.35]))
+    albedo = colour * (1 + 0.05 * g.standard_normal(rho.shape))[..., None]
+    near, far = rho < 0.25, rho > 0.7
+    kept = cv.albedo_to_linear(flatten_flash_trends(_stored(albedo, np.full(rho.shape + (1,), 0.4)), rho)["diffuse"])
+    for part in (grout, ~grout):  # with one level for all: 0.50 (grout) and 0.66 (tiles) near the foot
+        assert 0.95 < kept[near & part].mean() / albedo[near & part].mean() < 1.05
+        assert 0.95 < kept[far & part].mean() / albedo[far & part].mean() < 1.05
+    spot = 1 + 0.5 * np.exp(-(rho / 0.3) ** 2)
+    flat = cv.albedo_to_linear(flatten_flash_trends(_stored(albedo * spot[..., None],
+                                                            np.full(rho.shape + (1,), 0.4)), rho)["diffuse"])
+    for part in (grout, ~grout):  # 1.4 left in; 0.50 and 0.65 with one level for all
+        ratio = flat[near & part].mean() / flat[far & part].mean()
+        assert 0.93 < ratio / (albedo[near & part].mean() / albedo[far & part].mean()) < 1.07
+
+
+def test_colours_are_told_apart_by_their_chromaticity_not_by_the_flashs_brightness():
+    from svbrdf_cli.imageops import chroma_classes
+    from svbrdf_cli.infer.swift import TREND_CLASSES, TREND_CLASSES_APART
+
+    rho = _rho()
+    falloff = np.exp(-rho)[..., None]  # the flash brightens one colour by 2.7x from the corner to the foot
+    grey = 0.3 * falloff * np.ones(3)
+    assert chroma_classes(grey, TREND_CLASSES, TREND_CLASSES_APART) is None
+    two = np.where((rho < 0.5)[..., None], np.float32([0.7, 0.6, 0.3]), np.float32([0.08, 0.1, 0.35])) * falloff
+    classes = chroma_classes(two, TREND_CLASSES, TREND_CLASSES_APART)
+    assert classes is not None and classes.max() == 1
+    assert len(set(classes[(rho < 0.5).ravel()])) == 1 and len(set(classes[(rho >= 0.5).ravel()])) == 1
+
+
 def test_the_diffuse_under_a_clipped_highlight_is_filled_from_around_it():
     from svbrdf_cli.infer.swift import fill_highlight
 
