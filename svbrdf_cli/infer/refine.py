@@ -128,7 +128,13 @@ SPECULAR_RANGE = (0.0, 1.0)
 #: (the global intensity fitted at the start, a highlight spread by relief the flat start lacks),
 #: while its variation from pixel to pixel is the photo's evidence. Without a floor the fit lowered F0
 #: on 27 of the 29 Des19 samples; a floor on every pixel's F0 relit the card worse (its foil scales do
-#: reflect less than 0.04 in places).
+#: reflect less than 0.04 in places). The fit still draws a dark F0 dot on the bundled tiles, at a grout
+#: corner beside the clipped highlight (0.011 against 0.046 round it). Two ways to stop it were measured
+#: through the command with the installed chain and not kept: every pixel's F0 luminance at least 0.03
+#: (the dot at 0.03; the card 0.1201 -> 0.1201, from its 9 photos 0.1428 -> 0.1445, the 48 generated
+#: known-light captures 0.0551 -> 0.0554), and F0's change one value per albedo class, as the
+#: roughness's (:func:`_per_class` on each channel; no dot; Des19 specular 0.0579 -> 0.0572 but relief
+#: 0.426 -> 0.425, the card 0.1195 -> 0.1217, from its 9 photos 0.1436 -> 0.1466).
 SPECULAR_FLOOR = cv.DIELECTRIC_F0
 #: Diffuse, roughness and F0 may change from pixel to pixel but not with the distance to the
 #: highlight: after each step their change (the diffuse's in its logarithm: a relative change) loses its
