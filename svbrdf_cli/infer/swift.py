@@ -226,7 +226,9 @@ def flatten_flash_trends(stored, rho, names=("diffuse", "roughness")):
     0.79 -> 0.82) and its fine detail at least half the ring's on 31 -> 32 (the card 0.48 -> 0.52); the
     48 generated known-light captures (``known_lights``) 0.0551 -> 0.0541, worse than the floor on 9 -> 7;
     the card 0.1201 -> 0.1195, from its 9 photos 0.1428 -> 0.1436; Des19 (``capture_eval --all-card``)
-    unchanged but specular 0.0578 -> 0.0579. In the physical estimate's own last step
+    unchanged but specular 0.0578 -> 0.0579. With 4 colours, joined under 0.15 apart: fine detail 33, brightness
+    31 of 34, known lights 0.0543, the card 0.1194 (9 photos 0.1431), Des19 diffuse 0.0313 and roughness
+    0.1279. In the physical estimate's own last step
     (:func:`svbrdf_cli.infer.physical.estimate`) it was measured and not kept: ``--model physical`` Des19
     diffuse 0.0350 -> 0.0358, the card 0.1292 -> 0.1288, from its 9 photos 0.1613 -> 0.1624, the spot's
     brightness in bounds on 29 -> 28 of 34 photos; the default's diffuse (whose level is halfway to the
