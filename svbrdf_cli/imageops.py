@@ -195,18 +195,29 @@ def rings(rho, count):
     return np.clip(np.digitize(rho.ravel(), edges) - 1, 0, count - 1), 0.5 * (edges[:-1] + edges[1:])
 
 
+def _log_colour(diffuse_lin):
+    """(H*W, 3) float32 log of the linear colour (floored at 1e-3): the k-means features' start."""
+    return np.log(np.maximum(diffuse_lin, 1e-3)).reshape(-1, 3).astype(np.float32)
+
+
+def _seeded_kmeans(features, k, every, attempts):
+    """(k, C) k-means centres of every ``every``-th row of ``features`` (``attempts`` restarts, k-means++,
+    OpenCV's generator seeded so the same image gives the same classes)."""
+    import cv2
+
+    crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 1e-3)
+    cv2.setRNGSeed(0)
+    return cv2.kmeans(features[::every], k, None, crit, attempts, cv2.KMEANS_PP_CENTERS)[2]
+
+
 def chroma_classes(diffuse_lin, k, apart, every=7, attempts=2):
     """(H*W,) int class of each pixel of the linear ``diffuse_lin`` by its chromaticity alone (its log colour
     less the mean of its three channels, which a change of brightness leaves as it is): k-means (on every
     ``every``-th pixel, ``attempts`` restarts, seeded), a centre closer than ``apart`` (log units) to an
     earlier one joining that one's class; None when that leaves one class."""
-    import cv2
-
-    f = np.log(np.maximum(diffuse_lin, 1e-3)).reshape(-1, 3).astype(np.float32)
+    f = _log_colour(diffuse_lin)
     f -= f.mean(1, keepdims=True)
-    crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 1e-3)
-    cv2.setRNGSeed(0)
-    _, _, centres = cv2.kmeans(f[::every], k, None, crit, attempts, cv2.KMEANS_PP_CENTERS)
+    centres = _seeded_kmeans(f, k, every, attempts)
     joined = np.arange(k)
     for i in range(1, k):
         near = np.flatnonzero(np.linalg.norm(centres[:i] - centres[i], axis=1) < apart)
@@ -221,13 +232,9 @@ def soft_classes(diffuse_lin, k, every=7, attempts=2):
     """(H*W, k) soft assignment of each pixel of the linear ``diffuse_lin`` to ``k`` classes of its log
     colour: k-means (on every ``every``-th pixel, ``attempts`` restarts, seeded), each pixel weighted by
     its squared distances to the centres over the median distance to the second nearest."""
-    import cv2
-
-    f = np.log(np.maximum(diffuse_lin, 1e-3)).reshape(-1, 3).astype(np.float32)
+    f = _log_colour(diffuse_lin)
     f = (f - f.mean(0)) / (float(f.std()) + 1e-6)
-    crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 1e-3)
-    cv2.setRNGSeed(0)
-    _, _, centres = cv2.kmeans(f[::every], k, None, crit, attempts, cv2.KMEANS_PP_CENTERS)
+    centres = _seeded_kmeans(f, k, every, attempts)
     d2 = ((f[:, None, :] - centres[None]) ** 2).sum(-1)
     p = np.exp(-(d2 - d2.min(1, keepdims=True)) / max(float(np.median(np.sort(d2, 1)[:, 1])), 1e-4))
     return p / p.sum(1, keepdims=True)

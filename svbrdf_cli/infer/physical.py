@@ -325,13 +325,14 @@ def _class_trend(logl, ring, wt, centres, classes):
     t = centres / max(float(centres[-1]), 1e-6)
     powers = t[:, None] ** np.arange(1, RADIAL_DEGREE + 1)
     k = int(classes.max()) + 1
+    onehot = np.eye(k)
     rows, levels, n_fit = [], [], []
     for c in range(k):
         m = classes == c
         n = np.bincount(ring[m], weights=wt[m], minlength=count)
         mean = _ring_midmeans(logl[m], ring[m], wt[m], count)
         for r in np.flatnonzero(n >= RING_MIN):
-            rows.append(np.concatenate([np.eye(k)[c], powers[r]]))
+            rows.append(np.concatenate([onehot[c], powers[r]]))
             levels.append(mean[r])
             n_fit.append(n[r])
     if len(rows) < k + RADIAL_DEGREE + 1:

@@ -236,10 +236,12 @@ def flatten_flash_trends(stored, rho, names=("diffuse", "roughness")):
     from svbrdf_cli.imageops import chroma_classes
     from svbrdf_cli.infer.physical import flatten_radial
 
-    classes = chroma_classes(cv.albedo_to_linear(stored["diffuse"]), TREND_CLASSES, TREND_CLASSES_APART)
+    albedos = [k for k in ("diffuse", "specular") if k in names]
+    classes = chroma_classes(cv.albedo_to_linear(stored["diffuse"]), TREND_CLASSES, TREND_CLASSES_APART) \
+        if albedos else None
     out = {k: cv.albedo_to_stored(np.clip(flatten_radial(cv.albedo_to_linear(stored[k]), rho, classes=classes),
                                           0.0, 1.0)).astype(np.float32)
-           for k in ("diffuse", "specular") if k in names}  # the albedos, in linear units
+           for k in albedos}  # the albedos, in linear units
     if "roughness" in names:
         r = np.repeat(stored["roughness"], 3, -1)
         out["roughness"] = np.clip(flatten_radial(r, rho)[..., :1], 0.0, 1.0).astype(np.float32)
