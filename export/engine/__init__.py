@@ -16,8 +16,8 @@ def keep_memory():
     """Keep freed memory in this process instead of handing it back to the system: glibc gives large
     blocks back at every ``free`` and faults them in again at the next step (10% of a training step
     in system time, measured). Blocks up to 32 MB (glibc's largest threshold: every activation of a
-    step at 128², batch 16) stay in the heap, which is never trimmed; larger ones (the bank's
-    arrays) are still mapped and unmapped, so the bank is not held twice. No-op without glibc."""
+    step at 128², batch 16) stay in the heap, which is never trimmed; larger ones are still mapped
+    and unmapped. No-op without glibc."""
     import ctypes
     import ctypes.util
 

@@ -18,7 +18,8 @@ and the manifest lists every shard with its materials' sources (``procedural:<fa
 
 ``python -m export.engine bank --count 8000`` grows the bank to at least that many materials
 (appending shards, so an interrupted build keeps what it made); a training run grows it to its
-``--bank-count`` before it starts. Training loads every shard into memory (:class:`Bank`).
+``--bank-count`` before it starts. Training maps every shard from disk (:class:`Bank`, through one file
+per map under ``flat/``).
 """
 
 from __future__ import annotations
@@ -332,8 +333,68 @@ def grow(root=None, target=8000, seed=0, shared=None, progress=print):
     return have
 
 
+#: The maps a shard holds, in the order :func:`flat_arrays` writes them.
+MAPS = ("diffuse", "specular", "roughness", "normal")
+#: The folder under the bank where :func:`flat_arrays` keeps every shard's maps end to end.
+FLAT = "flat"
+
+
+def flat_arrays(root, shards):
+    """The maps of ``shards`` (the manifest's first shards, in order) as arrays mapped from disk,
+    name -> (N, S, S[, C]), from one uncompressed ``.npy`` per map under ``root/flat/`` that holds every
+    shard of the manifest end to end (written on first use, and again when the bank has grown).
+
+    Mapped, not read into memory: the bank (19200 materials: 13 GB) is the page cache's, which the
+    kernel takes back when another process needs the memory, where as a process's own memory the run
+    held 14.5 GB and the kernel killed it when an evaluation beside it took 9 GB more."""
+    folder = os.path.join(root, FLAT)
+    want = [s["file"] for s in shards]
+    try:
+        with open(os.path.join(folder, "flat.json")) as f:
+            have = json.load(f)
+    except (OSError, ValueError):
+        have = {}
+    if have.get("shards", [])[:len(want)] != want:
+        have = _write_flat(root, folder)
+    total = sum(have["counts"][:len(want)])
+    # copy-on-write mapping: writable for torch, and nothing is ever written to it
+    return {k: np.load(os.path.join(folder, f"{k}.npy"), mmap_mode="c")[:total] for k in MAPS}
+
+
+def _write_flat(root, folder):
+    """Every shard of the manifest under ``root`` end to end into ``folder`` (:func:`flat_arrays`);
+    returns what ``flat.json`` records (the shards and their counts), written last."""
+    shards = read_manifest(root)["shards"]
+    os.makedirs(folder, exist_ok=True)
+    info = os.path.join(folder, "flat.json")
+    if os.path.exists(info):
+        os.remove(info)  # (a write cut short leaves no record that its files are whole)
+    with np.load(os.path.join(root, shards[0]["file"])) as z:
+        first = {k: z[k] for k in MAPS}
+    counts = [len(s["sources"]) for s in shards]
+    for k in MAPS:
+        tmp = os.path.join(folder, f"{k}.{os.getpid()}.tmp.npy")
+        out = np.lib.format.open_memmap(tmp, mode="w+", dtype=first[k].dtype,
+                                        shape=(sum(counts),) + first[k].shape[1:])
+        at = 0
+        for s, n in zip(shards, counts):
+            with np.load(os.path.join(root, s["file"])) as z:
+                out[at:at + n] = z[k]
+            at += n
+        out.flush()
+        del out
+        os.replace(tmp, os.path.join(folder, f"{k}.npy"))
+    record = {"shards": [s["file"] for s in shards], "counts": counts}
+    tmp = info + f".{os.getpid()}.tmp"
+    with open(tmp, "w") as f:
+        json.dump(record, f)
+    os.replace(tmp, info)
+    return record
+
+
 class Bank:
-    """Every shard of a bank in memory as uint8/int16 tensors (about 11 bytes a pixel)."""
+    """Every shard of a bank as uint8/int16 tensors (about 11 bytes a pixel), mapped from disk
+    (:func:`flat_arrays`)."""
 
     def __init__(self, root=None, limit_shards=None):
         root = root or default_root()
@@ -342,19 +403,8 @@ class Bank:
         if not shards:
             raise FileNotFoundError(f"{root}: the material bank is empty; grow it with "
                                     "`python -m export.engine bank --count 8000`")
-        # filled in place, shard by shard: a list of shards concatenated at the end held the bank twice
-        # (14080 materials peaked at 18 GB against 10.4 GB, and the kernel killed the run for it)
-        total = sum(len(s["sources"]) for s in shards)
-        self.arrays, self.sources = {}, []
-        for s in shards:
-            at = len(self.sources)
-            with np.load(os.path.join(root, s["file"])) as z:
-                for k in ("diffuse", "specular", "roughness", "normal"):
-                    part = torch.from_numpy(z[k])
-                    if k not in self.arrays:
-                        self.arrays[k] = torch.empty((total,) + tuple(part.shape[1:]), dtype=part.dtype)
-                    self.arrays[k][at:at + len(part)] = part
-            self.sources += s["sources"]
+        self.arrays = {k: torch.from_numpy(v) for k, v in flat_arrays(root, shards).items()}
+        self.sources = [src for s in shards for src in s["sources"]]
         #: (N,) bool: the materials scanned from real ones (the CC0 sets), not made procedurally.
         self.scanned = torch.tensor([s.startswith("cc0:") for s in self.sources], dtype=torch.bool)
         self.root = root

@@ -60,6 +60,32 @@ def test_bank_grows_the_same_in_two_sittings(tmp_path, small_bank):
         assert torch.equal(a.arrays[k], b.arrays[k]), k
 
 
+def test_the_bank_is_mapped_from_disk_as_its_shards_hold_it_and_follows_its_growth(tmp_path):
+    root = str(tmp_path / "bank")
+    bank_mod.grow(root, bank_mod.SHARD, progress=None)
+    bank = bank_mod.Bank(root)
+    shards = bank_mod.read_manifest(root)["shards"]
+    with open("/proc/self/maps") as f:  # the tensors' memory is the flat files' mapping
+        mapped = [[int(x, 16) for x in line.split()[0].split("-")] + [line.split()[-1]] for line in f]
+    with np.load(os.path.join(root, shards[0]["file"])) as z:
+        for k in bank_mod.MAPS:
+            at = bank.arrays[k].data_ptr()
+            assert any(a <= at < b and name.endswith(f"{k}.npy") for a, b, name in mapped), k
+            assert np.array_equal(bank.arrays[k].numpy(), z[k]), k
+    flat = os.path.join(root, bank_mod.FLAT, "diffuse.npy")
+    made = os.stat(flat).st_mtime_ns
+    bank_mod.grow(root, 2 * bank_mod.SHARD, progress=None)
+    assert len(bank_mod.Bank(root, limit_shards=1)) == bank_mod.SHARD
+    assert os.stat(flat).st_mtime_ns == made  # a prefix the flat files hold: not written again
+    grown = bank_mod.Bank(root)
+    assert len(grown) == 2 * bank_mod.SHARD and os.stat(flat).st_mtime_ns != made
+    with np.load(os.path.join(root, bank_mod.read_manifest(root)["shards"][1]["file"])) as z:
+        assert np.array_equal(grown.arrays["normal"][bank_mod.SHARD:].numpy(), z["normal"])
+    for k in bank_mod.MAPS:
+        assert torch.equal(grown.arrays[k][:bank_mod.SHARD], bank.arrays[k]), k
+    assert not [f for f in os.listdir(os.path.dirname(flat)) if "tmp" in f]
+
+
 def test_a_bank_grown_past_its_print_shards_holds_prints_and_keeps_its_earlier_shards(tmp_path, small_bank,
                                                                                       monkeypatch):
     from click.testing import CliRunner
