@@ -367,8 +367,7 @@ class Run:
             root = self.config.bank_root or bank_mod.default_root()
             if bank_mod.count(root) < self.config.bank_count:
                 bank_mod.grow(root, self.config.bank_count, progress=self.log)
-            # the first bank_count materials, whatever more a bigger run left in the folder (all 16000
-            # at once peaked at 20 GB, past this 24 GB machine's room beside other work)
+            # the first bank_count materials, whatever more a bigger run left in the folder
             self.bank = bank_mod.Bank(root, limit_shards=math.ceil(self.config.bank_count / bank_mod.SHARD))
         return self.bank
 
