@@ -34,6 +34,7 @@ import torch
 
 from export.data import augment, procedural
 from export.data.noise import luminance
+from export.files import read_json, write_json
 from svbrdf_cli import conventions as cv
 
 SIZE = 256
@@ -349,11 +350,7 @@ def flat_arrays(root, shards):
     held 14.5 GB and the kernel killed it when an evaluation beside it took 9 GB more."""
     folder = os.path.join(root, FLAT)
     want = [s["file"] for s in shards]
-    try:
-        with open(os.path.join(folder, "flat.json")) as f:
-            have = json.load(f)
-    except (OSError, ValueError):
-        have = {}
+    have = read_json(os.path.join(folder, "flat.json"))
     if have.get("shards", [])[:len(want)] != want:
         have = _write_flat(root, folder)
     total = sum(have["counts"][:len(want)])
@@ -362,33 +359,36 @@ def flat_arrays(root, shards):
 
 
 def _write_flat(root, folder):
-    """Every shard of the manifest under ``root`` end to end into ``folder`` (:func:`flat_arrays`);
-    returns what ``flat.json`` records (the shards and their counts), written last."""
+    """Every shard of the manifest under ``root`` end to end into ``folder`` (:func:`flat_arrays`), each
+    shard read once; returns what ``flat.json`` records (the shards and their counts), written last."""
     shards = read_manifest(root)["shards"]
     os.makedirs(folder, exist_ok=True)
     info = os.path.join(folder, "flat.json")
     if os.path.exists(info):
         os.remove(info)  # (a write cut short leaves no record that its files are whole)
-    with np.load(os.path.join(root, shards[0]["file"])) as z:
-        first = {k: z[k] for k in MAPS}
     counts = [len(s["sources"]) for s in shards]
-    for k in MAPS:
-        tmp = os.path.join(folder, f"{k}.{os.getpid()}.tmp.npy")
-        out = np.lib.format.open_memmap(tmp, mode="w+", dtype=first[k].dtype,
-                                        shape=(sum(counts),) + first[k].shape[1:])
-        at = 0
+    tmp = {k: os.path.join(folder, f"{k}.{os.getpid()}.tmp.npy") for k in MAPS}
+    out, at = {}, 0
+    try:
         for s, n in zip(shards, counts):
             with np.load(os.path.join(root, s["file"])) as z:
-                out[at:at + n] = z[k]
+                for k in MAPS:
+                    part = z[k]
+                    if k not in out:
+                        out[k] = np.lib.format.open_memmap(tmp[k], mode="w+", dtype=part.dtype,
+                                                           shape=(sum(counts),) + part.shape[1:])
+                    out[k][at:at + n] = part
             at += n
-        out.flush()
-        del out
-        os.replace(tmp, os.path.join(folder, f"{k}.npy"))
+        for k in MAPS:
+            out.pop(k).flush()
+            os.replace(tmp[k], os.path.join(folder, f"{k}.npy"))
+    finally:
+        out.clear()
+        for path in tmp.values():
+            if os.path.exists(path):
+                os.remove(path)
     record = {"shards": [s["file"] for s in shards], "counts": counts}
-    tmp = info + f".{os.getpid()}.tmp"
-    with open(tmp, "w") as f:
-        json.dump(record, f)
-    os.replace(tmp, info)
+    write_json(info, record)
     return record
 
 
