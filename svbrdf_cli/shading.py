@@ -185,7 +185,7 @@ def render_with_gradient(tilt, diffuse, roughness, specular, lighting):
     """
     L = lighting
     m = np.concatenate([tilt, np.ones_like(tilt[..., :1])], -1)
-    inv = 1.0 / np.sqrt((m * m).sum(-1, keepdims=True))
+    inv = 1.0 / np.sqrt(tilt[..., 0:1] * tilt[..., 0:1] + tilt[..., 1:2] * tilt[..., 1:2] + 1.0)
     n = m * inv
     nl, nv, nh = _dot(n, L.l), _dot(n, L.v), _dot(n, L.h)
     nlc, nvc, nhc = np.clip(nl, 0.0, 1.0), np.clip(nv, 0.0, 1.0), np.clip(nh, 0.0, 1.0)
@@ -200,16 +200,18 @@ def render_with_gradient(tilt, diffuse, roughness, specular, lighting):
     a_c, b_c = np.maximum(a_raw, cv.EPS), np.maximum(b_raw, cv.EPS)
     vis = 1.0 / (a_c * b_c)
     fw = L.fresnel_weight
+    kept = (1.0 - specular) * (1.0 / np.pi)  # the diffuse's share: d (1 - s) / pi
     fres = specular + (1.0 - specular) * fw
     lobe = ndf * vis * 0.25
-    f = diffuse * (1.0 - specular) / np.pi + lobe * fres
-    radiance = L.scale * f * nlc
+    f = diffuse * kept + lobe * fres
+    lit = L.scale * nlc
+    radiance = f * lit
 
     def backward(grad):
-        g_f = grad * L.scale * nlc
-        g = {"diffuse": g_f * (1.0 - specular) / np.pi,
-             "specular": g_f * (lobe * (1.0 - fw) - diffuse / np.pi)}
-        g_lobe = (g_f * fres).sum(-1, keepdims=True)
+        g_f = grad * lit
+        g = {"diffuse": g_f * kept,
+             "specular": g_f * (lobe * (1.0 - fw) - diffuse * (1.0 / np.pi))}
+        g_lobe = _dot(g_f, fres)
         g_ndf, g_vis = g_lobe * vis * 0.25, g_lobe * ndf * 0.25
         # D = a2 / (pi q^2), q = nh^2 (a2 - 1) + 1
         d_ndf_a2 = 1.0 / (np.pi * qc * qc) - q_free * 2.0 * a2 * nhc * nhc / (np.pi * qc ** 3)
@@ -222,7 +224,7 @@ def render_with_gradient(tilt, diffuse, roughness, specular, lighting):
         d_vis_nv = -vis * db * (1.0 - k) * in_v
         g_alpha = g_ndf * d_ndf_a2 * 2.0 * alpha + g_vis * d_vis_k * 0.5
         g["roughness"] = g_alpha * 2.0 * roughness
-        g_nl = (grad * L.scale * f).sum(-1, keepdims=True) * in_l + g_vis * d_vis_nl
+        g_nl = _dot(grad, f) * L.scale * in_l + g_vis * d_vis_nl
         g_n = g_ndf * d_ndf_nh * L.h + g_nl * L.l + g_vis * d_vis_nv * L.v
         g_m = (g_n - _dot(g_n, n) * n) * inv
         g["tilt"] = g_m[..., :2]

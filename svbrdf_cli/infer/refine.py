@@ -231,11 +231,23 @@ def _unclipped(photo_lin):
     return np.clip((dist - r) / r, 0.0, 1.0)[..., None].astype(np.float32)
 
 
+def _dot_flat(a, b):
+    """Sum of ``a * b`` over all elements, without the product's temporary array (``einsum``: one pass on
+    this thread; BLAS's dot product would wake its threads, which spin on a core a batch or the
+    training run is using)."""
+    return float(np.einsum("i,i->", np.ascontiguousarray(a).ravel(), np.ascontiguousarray(b).ravel()))
+
+
+def _sum_sq(x):
+    """Sum of the squares of ``x``."""
+    return _dot_flat(x, x)
+
+
 def _smoothness(x):
     """Mean over pixels of squared neighbour differences, and its gradient."""
     dx, dy = np.diff(x, axis=1), np.diff(x, axis=0)
     n = x.shape[0] * x.shape[1]
-    val = float((dx * dx).sum() + (dy * dy).sum()) / n
+    val = (_sum_sq(dx) + _sum_sq(dy)) / n
     g = np.zeros_like(x)
     g[:, :-1] -= dx
     g[:, 1:] += dx
@@ -259,6 +271,8 @@ class _Problem:
         side = photo_lin.shape[0]
         self.weight = _unclipped(photo_lin) if weight is None else weight
         self.count = max(float(self.weight.sum()) * 3.0, 1.0)
+        # each residual's weight in the photo term, per channel
+        self.scaled_weight = np.ascontiguousarray(np.broadcast_to(self.weight / np.float32(self.count), photo_lin.shape))
         self.target = _encode(photo_lin)[0]
         self.init = dict(init, diffuse_lin=np.exp(init["diffuse"]))
         self.lighting = shading.Lighting(side, side, geometry.light, geometry.camera, intensity)
@@ -268,35 +282,36 @@ class _Problem:
 
     def photo_loss(self, p):
         r, _ = shading.render_with_gradient(*_maps(p), self.lighting)
-        return float((self.weight * _robust(_encode(r)[0] - self.target)[0]).sum() / self.count)
+        return _dot_flat(self.scaled_weight, _robust(_encode(r)[0] - self.target)[0])
 
     def __call__(self, p):
         """(objective, photo term, gradient dict like ``p``)."""
         pr, init = self.priors, self.init
-        r, backward = shading.render_with_gradient(*_maps(p), self.lighting)
+        maps = _maps(p)
+        r, backward = shading.render_with_gradient(*maps, self.lighting)
         y, dy = _encode(r)
         rho, drho = _robust(y - self.target)
-        data = float((self.weight * rho).sum() / self.count)
-        g = backward(self.weight * drho * dy / self.count)
-        d = np.exp(p["diffuse"])
+        data = _dot_flat(self.scaled_weight, rho)
+        g = backward(self.scaled_weight * drho * dy)
+        d = maps[1]
         g["diffuse"] = g["diffuse"] * d  # through d = exp(u)
         n = float(r.shape[0] * r.shape[1])
         total = data
         d0 = init["diffuse_lin"]
         rel = (d - d0) / (d0 + 0.05)
-        total += pr.diffuse * float((rel * rel).sum()) / (3 * n)
+        total += pr.diffuse * _sum_sq(rel) / (3 * n)
         g["diffuse"] += pr.diffuse * 2.0 * rel / (d0 + 0.05) * d / (3 * n)
         for key, w, ch in (("roughness", pr.roughness, 1), ("specular", pr.specular, 3), ("tilt", pr.normal, 2)):
             dv = p[key] - init[key]
-            total += w * float((dv * dv).sum()) / (ch * n)
+            total += w * _sum_sq(dv) / (ch * n)
             g[key] += w * 2.0 * dv / (ch * n)
         if pr.broad_tilt:  # the blur is symmetric: its own adjoint
             b = _broad(p["tilt"] - init["tilt"])
-            total += pr.broad_tilt * float((b * b).sum()) / (2 * n)
+            total += pr.broad_tilt * _sum_sq(b) / (2 * n)
             g["tilt"] += pr.broad_tilt * 2.0 * _broad(b) / (2 * n)
         # the dielectric prior holds F0's level (its luminance), not its colour (see Priors.dielectric)
         ds = luminance(p["specular"]) - cv.DIELECTRIC_F0
-        total += pr.dielectric * float((ds * ds).sum()) / n
+        total += pr.dielectric * _sum_sq(ds) / n
         g["specular"] += pr.dielectric * 2.0 * ds[..., None] * imageops.LUMA32 / n
         for key, w in (("roughness", pr.smooth_roughness), ("specular", pr.smooth_specular)):
             val, gs = _smoothness(p[key])
@@ -323,27 +338,74 @@ def _spec_change(change, tint, level, own=None):
     more. A dielectric's highlight is the flash's white, so its F0 changes in grey (a wood's F0 tinted by
     its diffuse renders pink highlights and reads as metal); a foil whose highlight the photo shows in
     its own colour may take that colour even at a dielectric's level."""
-    one = np.ones_like(tint)
-    g11, g12, g22 = 3.0, tint.sum(-1, keepdims=True), (tint * tint).sum(-1, keepdims=True)
-    r1, r2 = change.sum(-1, keepdims=True), (change * tint).sum(-1, keepdims=True)
-    det = g11 * g22 - g12 * g12
-    ok = det > 1e-6  # a grey diffuse has no tint of its own
-    b = np.where(ok, (g11 * r2 - g12 * r1) / np.where(ok, det, 1.0), 0.0)
-    metal = cv.metal_weight(level)
-    if own is not None:
-        metal = np.maximum(metal, own)
-    b = np.clip(b, 0.0, (metal * np.maximum(level, 0.0))[..., None])
-    a = (r1 - b * g12) / g11
-    return (a * one + b * tint).astype(np.float32)
+    return _TintBasis(tint).project(change, level, own)
 
 
-def _radial(side, centre, rings=RADIAL_RINGS):
-    """(distance of each pixel to ``centre`` (H, W), ring centres, ring of each pixel (flat), pixels per
-    ring) at ``side``², the rings of :func:`svbrdf_cli.imageops.rings`; made once per level."""
-    p = cv.surface_positions(side, side)
-    rho = np.hypot(p[..., 0] - centre[0], p[..., 1] - centre[1]).astype(np.float32)
-    ring, centres = imageops.rings(rho, rings)
-    return rho, centres, ring, np.bincount(ring, minlength=rings).astype(np.float64)
+class _TintBasis:
+    """:func:`_spec_change`'s least squares for one ``tint`` (H, W, 3), its normal equations' terms made once
+    (per level of :func:`refine`)."""
+
+    def __init__(self, tint):
+        self.tint = tint
+        self.g12 = tint[..., 0:1] + tint[..., 1:2] + tint[..., 2:3]
+        det = 3.0 * (tint[..., 0:1] ** 2 + tint[..., 1:2] ** 2 + tint[..., 2:3] ** 2) - self.g12 * self.g12
+        ok = det > 1e-6  # a grey diffuse has no tint of its own
+        self.inv_det = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0).astype(np.float32)
+
+    def project(self, change, level, own=None):
+        """:func:`_spec_change` of ``change``."""
+        t = self.tint
+        r1 = change[..., 0:1] + change[..., 1:2] + change[..., 2:3]
+        r2 = change[..., 0:1] * t[..., 0:1] + change[..., 1:2] * t[..., 1:2] + change[..., 2:3] * t[..., 2:3]
+        b = (3.0 * r2 - self.g12 * r1) * self.inv_det
+        metal = cv.metal_weight(level)
+        if own is not None:
+            metal = np.maximum(metal, own)
+        b = np.clip(b, 0.0, (metal * np.maximum(level, 0.0))[..., None])
+        a = (r1 - b * self.g12) / 3.0
+        return (a + b * t).astype(np.float32)
+
+
+class _Rings:
+    """The rings round ``centre`` (the highlight's) at ``side``², those of :func:`svbrdf_cli.imageops.rings`, made
+    once per level: each pixel's ring, where it falls between two ring centres (the piecewise-linear
+    interpolation of ``np.interp``, held at the ends, as indices and fractions), and its direction away
+    from the centre. :func:`_without_radial_trend` and :func:`_without_radial_tilt` use them at every step."""
+
+    def __init__(self, side, centre, rings=RADIAL_RINGS):
+        p = cv.surface_positions(side, side)
+        off = np.stack([p[..., 0] - centre[0], p[..., 1] - centre[1]], -1)
+        self.rho = np.hypot(off[..., 0], off[..., 1]).astype(np.float32)
+        self.ring, self.centres = imageops.rings(self.rho, rings)
+        self.count = np.bincount(self.ring, minlength=rings).astype(np.float64)
+        self.away = (off / np.maximum(self.rho, 1e-6)[..., None]).astype(np.float32)
+        c, rho = self.centres, self.rho.ravel()
+        self.lower = np.clip(np.searchsorted(c, rho, "right") - 1, 0, rings - 2)
+        frac = np.clip((rho - c[self.lower]) / (c[self.lower + 1] - c[self.lower]), 0.0, 1.0)
+        self.frac = frac.astype(np.float32)
+        # the interpolation's mean over the pixels, as weights of the ring values
+        self.mean_weights = (np.bincount(self.lower, 1.0 - frac, minlength=rings) +
+                             np.bincount(self.lower + 1, frac, minlength=rings)) / rho.size
+
+    def interpolate(self, values, ok):
+        """(H, W) float32: ``values`` (one per ring; those of the ``ok`` rings count) interpolated between the
+        ring centres at each pixel, and its mean over the pixels."""
+        if not ok.all():  # the same polyline through the rings that have pixels only
+            values = np.interp(self.centres, self.centres[ok], values[ok])
+        v = values.astype(np.float32)
+        t = v[self.lower] + np.diff(v)[self.lower] * self.frac
+        return t.reshape(self.rho.shape), float(self.mean_weights @ values)
+
+    def weights(self, weight, channels):
+        """Per channel of a map, what :func:`_without_radial_trend` weighs its ring means by: (each pixel's weight,
+        flat, or None for equal weights; each ring's; the map's). ``weight``: (H, W, C) or None."""
+        if weight is None:
+            return [(None, self.count, float(self.count.sum()))] * channels
+        out = []
+        for c in range(channels):
+            w = weight[..., c].ravel().astype(np.float64)
+            out.append((w, np.bincount(self.ring, weights=w, minlength=len(self.centres)), max(float(w.sum()), 1e-12)))
+        return out
 
 
 def _without_radial_trend(change, radial, weight=None):
@@ -351,23 +413,19 @@ def _without_radial_trend(change, radial, weight=None):
     centres (so no ring edge shows): what is left varies from pixel to pixel, not with the distance.
 
     ``weight`` (H, W, C), when given, weights each pixel in its ring's mean and in the map's (the
-    diffuse's start albedo, :func:`_radial_weight`); the trend is still taken off every pixel alike."""
-    rho, centres, ring, count = radial
+    diffuse's start albedo, :func:`_radial_weight`); the trend is still taken off every pixel alike. It
+    may also be :meth:`_Rings.weights`' list, made once for many changes."""
+    channels = change.shape[-1]
+    weights = weight if isinstance(weight, list) else radial.weights(weight, channels)
     out = np.empty_like(change)
-    for c in range(change.shape[-1]):
+    for c, (w, n, total) in enumerate(weights):
         v = change[..., c]
-        if weight is None:
-            w, n, level = None, count, float(v.mean())
-        else:
-            w = weight[..., c].ravel().astype(np.float64)
-            n = np.bincount(ring, weights=w, minlength=len(centres))
-            level = float((w * v.ravel()).sum() / max(float(w.sum()), 1e-12))
+        sums = np.bincount(radial.ring, weights=v.ravel() if w is None else v.ravel() * w,
+                           minlength=len(radial.centres))
         ok = n > 0
-        means = np.bincount(ring, weights=v.ravel().astype(np.float64) * (1.0 if w is None else w),
-                            minlength=len(centres))
-        trend = means[ok] / n[ok] - level
-        t = np.interp(rho, centres[ok], trend).astype(np.float32)
-        out[..., c] = v - (t - float(t.mean()))  # (interpolated, the trend's own mean is not quite 0)
+        trend = np.where(ok, sums / np.where(ok, n, 1.0), 0.0) - float(sums.sum()) / total
+        t, mean = radial.interpolate(trend, ok)
+        out[..., c] = v - (t - np.float32(mean))  # (interpolated, the trend's own mean is not quite 0)
     return out
 
 
@@ -388,19 +446,16 @@ def _radial_weight(key, params):
     return np.exp(params["diffuse"]) if key == "diffuse" else None
 
 
-def _without_radial_tilt(tilt, radial, centre):
-    """``tilt`` (H, W, 2) less its ring means' component along the direction away from ``centre`` (the
-    highlight's), interpolated between ring centres: a tilt that points away from (or towards) the flash
-    all round it is a bump (or a crater) under the highlight, which integrates into the height map; a
+def _without_radial_tilt(tilt, radial):
+    """``tilt`` (H, W, 2) less its ring means' component along the direction away from the highlight
+    (``radial``'s centre), interpolated between ring centres: a tilt that points away from (or towards) the
+    flash all round it is a bump (or a crater) under the highlight, which integrates into the height map; a
     relief's tilts point every way round any point."""
-    rho, centres, ring, count = radial
-    side = tilt.shape[0]
-    p = cv.surface_positions(side, side)
-    away = np.stack([p[..., 0] - centre[0], p[..., 1] - centre[1]], -1) / np.maximum(rho, 1e-6)[..., None]
-    along = (tilt * away).sum(-1)
-    ok = count > 0
-    means = np.bincount(ring, weights=along.ravel().astype(np.float64), minlength=len(centres))
-    t = np.interp(rho, centres[ok], means[ok] / count[ok]).astype(np.float32)
+    away = radial.away
+    along = tilt[..., 0] * away[..., 0] + tilt[..., 1] * away[..., 1]
+    ok = radial.count > 0
+    sums = np.bincount(radial.ring, weights=along.ravel(), minlength=len(radial.centres))
+    t, _ = radial.interpolate(np.where(ok, sums / np.where(ok, radial.count, 1.0), 0.0), ok)
     return (tilt - t[..., None] * away).astype(np.float32)
 
 
@@ -441,28 +496,44 @@ def _per_class(change, basis):
     return (classes @ values).reshape(change.shape).astype(np.float32)
 
 
-def parameters(stored):
-    """Stored maps -> optimisation parameters."""
-    lin = cv.decode_maps(stored)
-    return {"tilt": shading.normal_to_tilt(lin["normal"], TILT_LIMIT),
-            "diffuse": np.log(np.clip(lin["diffuse"], 1e-4, 1.0)).astype(np.float32),
-            "roughness": np.clip(lin["roughness"][..., :1], *ROUGHNESS_RANGE).astype(np.float32),
-            "specular": np.clip(lin["specular"], *SPECULAR_RANGE).astype(np.float32)}
+#: The optimisation's parameters, each from its stored map (:func:`parameters`) and back (:func:`_stored`).
+PARAMETERS = ("tilt", "diffuse", "roughness", "specular")
+
+#: The darkest linear diffuse albedo the parameters hold (its logarithm's floor).
+DIFFUSE_FLOOR = 1e-4
+
+
+def parameters(stored, keys=PARAMETERS):
+    """Stored maps -> optimisation parameters (those of ``keys``)."""
+    out = {}
+    if "tilt" in keys:
+        out["tilt"] = shading.normal_to_tilt(cv.decode_normals(stored["normal"]), TILT_LIMIT)
+    if "diffuse" in keys:
+        out["diffuse"] = np.log(np.clip(cv.albedo_to_linear(stored["diffuse"]), DIFFUSE_FLOOR, 1.0)).astype(np.float32)
+    if "roughness" in keys:
+        out["roughness"] = np.clip(stored["roughness"][..., :1], *ROUGHNESS_RANGE).astype(np.float32)
+    if "specular" in keys:
+        out["specular"] = np.clip(cv.albedo_to_linear(stored["specular"]), *SPECULAR_RANGE).astype(np.float32)
+    return out
 
 
 def _stored(p):
-    lin = {"normal": shading.tilt_to_normal(p["tilt"]), "diffuse": np.exp(p["diffuse"]),
-           "roughness": p["roughness"], "specular": p["specular"]}
-    out = cv.encode_maps(lin)
-    return {k: np.clip(v, 0.0, 1.0).astype(np.float32) for k, v in out.items()}
+    """Optimisation parameters (any of :data:`PARAMETERS`) -> stored maps in [0, 1], float32."""
+    lin = {"normal": shading.tilt_to_normal(p["tilt"]) if "tilt" in p else None,
+           "diffuse": np.exp(p["diffuse"]) if "diffuse" in p else None,
+           "roughness": p.get("roughness"), "specular": p.get("specular")}
+    encode = {"normal": cv.encode_normals, "diffuse": cv.albedo_to_stored, "roughness": lambda x: x,
+              "specular": cv.albedo_to_stored}
+    return {k: np.clip(encode[k](v), 0.0, 1.0).astype(np.float32, copy=False) for k, v in lin.items() if v is not None}
 
 
 def _project(p):
-    p["tilt"] = np.clip(p["tilt"], -TILT_LIMIT, TILT_LIMIT)
-    p["diffuse"] = np.clip(p["diffuse"], np.log(1e-4), 0.0)
-    p["roughness"] = np.clip(p["roughness"], *ROUGHNESS_RANGE)
-    p["specular"] = np.clip(p["specular"], *SPECULAR_RANGE)
-    if SPECULAR_FLOOR:  # grey added to every pixel when the map's mean luminance is under the floor
+    """Each of the parameters ``p`` holds (any of :data:`PARAMETERS`) into its range, in place of the dict's."""
+    ranges = {"tilt": (-TILT_LIMIT, TILT_LIMIT), "diffuse": (np.log(DIFFUSE_FLOOR), 0.0), "roughness": ROUGHNESS_RANGE,
+              "specular": SPECULAR_RANGE}
+    for k in p:
+        p[k] = np.clip(p[k], *ranges[k])
+    if SPECULAR_FLOOR and "specular" in p:  # grey added to every pixel when the map's mean luminance is under the floor
         short = SPECULAR_FLOOR - float((luminance(p["specular"])).mean())
         if short > 0:
             p["specular"] = np.clip(p["specular"] + np.float32(short), *SPECULAR_RANGE)
@@ -479,10 +550,10 @@ def fit_intensity(photo_lin, params, geometry, weight=None):
     return num / den if den > 0 else cv.FLASH_INTENSITY
 
 
-def _fill_unobserved(start, p, unobserved, radial, centre):
+def _fill_unobserved(start, p, unobserved, radial):
     """``p`` with its change from ``start`` (:data:`FILLED`: tilt, diffuse, roughness, F0) at the ``unobserved`` pixels (the
     photo clipped them) taken from their surroundings' change (:func:`svbrdf_cli.imageops.fill_from_surroundings`),
-    those of :data:`RADIAL_FREE` then freed of any radial trend again (``radial``: :func:`_radial`). The photo
+    those of :data:`RADIAL_FREE` then freed of any radial trend again (``radial``: :class:`_Rings`). The photo
     term is per pixel, so the fill leaves it as it is; see :data:`FILLED`."""
     if not unobserved.any() or unobserved.all():
         return p
@@ -492,7 +563,7 @@ def _fill_unobserved(start, p, unobserved, radial, centre):
         if k in RADIAL_FREE:
             change = _without_radial_trend(change, radial, _radial_weight(k, start))
         elif k == "tilt":
-            change = _without_radial_tilt(change, radial, centre)
+            change = _without_radial_tilt(change, radial)
         out[k] = (start[k] + change).astype(np.float32)
     _project(out)
     return out
@@ -535,13 +606,13 @@ def refine(image, stored, geometry, iterations=DEFAULT_ITERATIONS, priors=None, 
                                                weight=_at(full.weight, s))
         delta = {k: np.zeros_like(v) for k, v in init.items()} if delta is None else \
             {k: _at(v, s) for k, v in delta.items()}
-        tint = _tint(init["diffuse"])
+        tint = _TintBasis(_tint(init["diffuse"]))
         own_s = _at(own, s)[..., 0]
-        radial = _radial(s, geometry.highlight[:2])
-        weights = {k: _radial_weight(k, init) for k in RADIAL_FREE}
+        radial = _Rings(s, geometry.highlight[:2])
+        weights = {k: radial.weights(_radial_weight(k, init), init[k].shape[-1]) for k in RADIAL_FREE}
         basis = _class_basis(init["diffuse"], _lobe_share(init, prob.lighting, prob.weight))
         m1 = {k: np.zeros_like(v) for k, v in delta.items()}
-        m2 = {k: np.zeros_like(v) for k, v in delta.items()}
+        m2 = {k: np.zeros((1, 1, v.shape[-1]) if k in POOLED else v.shape, np.float32) for k, v in delta.items()}
         for i in range(1, steps + 1):
             p = {k: init[k] + delta[k] for k in delta}
             _project(p)
@@ -551,22 +622,24 @@ def refine(image, stored, geometry, iterations=DEFAULT_ITERATIONS, priors=None, 
             if s == side and (best_total is None or total < best_total):
                 best, best_total, best_data = p, total, data
             for k in delta:
-                m1[k] = 0.9 * m1[k] + 0.1 * g[k]
+                m1[k] *= 0.9
+                m1[k] += 0.1 * g[k]
                 g2 = g[k] * g[k]
                 if k in POOLED:  # one second moment per channel for the whole map
-                    g2 = np.broadcast_to(g2.mean((0, 1), keepdims=True), g2.shape)
-                m2[k] = 0.999 * m2[k] + 0.001 * g2
-                step = (m1[k] / (1 - 0.9 ** i)) / (np.sqrt(m2[k] / (1 - 0.999 ** i)) + 1e-12)
+                    g2 = g2.mean((0, 1), keepdims=True)
+                m2[k] *= 0.999
+                m2[k] += 0.001 * g2
+                step = m1[k] / (np.sqrt(m2[k] * np.float32(1.0 / (1 - 0.999 ** i))) + np.float32(1e-12))
+                step *= np.float32(1.0 / (1 - 0.9 ** i))
                 if k in POOLED:  # (a pixel whose gradient is many times the map's typical one: one step at most)
-                    step = np.clip(step, -1.0, 1.0)
-                step = STEP[k] * step
-                delta[k] = (delta[k] - step).astype(np.float32)
-            delta["specular"] = _spec_change(delta["specular"], tint,
-                                             luminance(init["specular"] + delta["specular"]), own_s)
+                    np.clip(step, -1.0, 1.0, out=step)
+                step *= np.float32(STEP[k])
+                delta[k] -= step
+            delta["specular"] = tint.project(delta["specular"], luminance(init["specular"] + delta["specular"]), own_s)
             for k in RADIAL_FREE:
                 delta[k] = _without_radial_trend(delta[k], radial, weights[k])
             delta["roughness"] = _per_class(delta["roughness"], basis)
-            delta["tilt"] = _only_fine(_without_radial_tilt(delta["tilt"], radial, geometry.highlight[:2]))
+            delta["tilt"] = _only_fine(_without_radial_tilt(delta["tilt"], radial))
             done += 1
             if progress:
                 progress(done)
@@ -581,7 +654,7 @@ def refine(image, stored, geometry, iterations=DEFAULT_ITERATIONS, priors=None, 
         if np.isfinite(total) and (best_total is None or total < best_total):
             best, best_data = p, data
     # (radial: the last level's, at full size)
-    best = _fill_unobserved(start, best, full.weight[..., 0] <= 0, radial, geometry.highlight[:2])
+    best = _fill_unobserved(start, best, full.weight[..., 0] <= 0, radial)
     out = _stored(best)
     ok = all(np.isfinite(v).all() for v in out.values()) and best_data <= loss_before
     if not ok:
@@ -606,11 +679,20 @@ def transfer(start, refined, target):
     Returns:
         stored-encoding maps at the output size (roughness one channel).
     """
-    a, b, t = (parameters({k: np.asarray(v, np.float32) for k, v in m.items()}) for m in (start, refined, target))
-    side = t["tilt"].shape[0]
-    p = {k: (t[k] + _at(b[k] - a[k], side)).astype(np.float32) for k in t}
+    a, b = (parameters({k: np.asarray(v, np.float32) for k, v in m.items()}) for m in (start, refined))
+    side = target["normal"].shape[0]
+    others = ("tilt", "roughness", "specular")
+    p = parameters({k: np.asarray(target[k], np.float32) for k in ("normal", "roughness", "specular")}, others)
+    for k in others:
+        p[k] += _at(b[k] - a[k], side)
     _project(p)
     out = _stored(p)
     out["roughness"] = out["roughness"][..., :1]
+    # the diffuse's change multiplies its linear albedo by exp(change), so its stored (gamma-encoded) value
+    # by exp(change / gamma), within the same floor and 1: the same maps as through the logarithm, in
+    # three passes over the output-size map instead of seven
+    floor = np.float32(DIFFUSE_FLOOR ** (1.0 / cv.ALBEDO_GAMMA))
+    factor = np.exp(_at(b["diffuse"] - a["diffuse"], side) * np.float32(1.0 / cv.ALBEDO_GAMMA))
+    out["diffuse"] = np.clip(np.clip(np.asarray(target["diffuse"], np.float32), floor, 1.0) * factor, floor, 1.0)
     return out
 

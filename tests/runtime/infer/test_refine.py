@@ -260,8 +260,8 @@ def test_the_floor_lifts_the_whole_map_and_keeps_its_variation():
 
 def test_the_radial_trend_is_taken_out_and_the_rest_kept():
     side = 64
-    radial = refine._radial(side, (0.2, -0.1))
-    rho = radial[0]
+    radial = refine._Rings(side, (0.2, -0.1))
+    rho = radial.rho
     disc = (0.1 * np.exp(-(rho / 0.4) ** 2))[..., None].astype(np.float32)  # darker, rougher where the flash was
     p = cv.surface_positions(side, side)
     stripes = (0.05 * np.sign(np.sin(p[..., 0] * 40.0)))[..., None].astype(np.float32)  # texture, not radial
@@ -276,8 +276,8 @@ def test_a_dark_patterns_change_is_not_read_as_a_trend_of_the_diffuse():
     # black spots (albedo 0.003) in the outer rings only, white plaster (0.04) elsewhere; the fit's log change
     # is -1.1 on the spots and -0.16 on the plaster (the spotted plaster of tests/runtime/cli/test_artist.py)
     side = 64
-    radial = refine._radial(side, (0.0, 0.0))
-    rho = radial[0]
+    radial = refine._Rings(side, (0.0, 0.0))
+    rho = radial.rho
     rng = np.random.default_rng(0)
     spots = (rho > 0.6) & (rng.uniform(size=rho.shape) < 0.25)
     albedo = np.repeat(np.where(spots, 0.003, 0.04)[..., None], 3, -1).astype(np.float32)
@@ -301,7 +301,7 @@ def test_refinement_leaves_no_disc_in_roughness_round_the_highlight():
     photo, truth = _photo(light, camera=light, roughness=0.2, seed=7)
     start = _stored(dict(truth, roughness=np.full_like(truth["roughness"], 0.45)))  # the start's lobe too broad
     geo = geometry.CaptureGeometry(camera=light, light=light, highlight=light[:2])
-    rho = refine._radial(256, light[:2])[0]
+    rho = refine._Rings(256, light[:2]).rho
 
     def disc(res):
         change = cv.decode_maps(res.stored)["roughness"][..., 0] - 0.45
@@ -314,7 +314,7 @@ def test_refinement_leaves_no_disc_in_roughness_round_the_highlight():
 def test_refinement_leaves_the_cameras_vignetting_out_of_the_diffuse(monkeypatch):
     light = (0.0, 0.0, 2.4)
     photo, truth = _photo(light, camera=light, seed=3)
-    rho = refine._radial(256, light[:2])[0]
+    rho = refine._Rings(256, light[:2]).rho
     vignetting = (1.0 - 0.25 * (rho / rho.max()) ** 2)[..., None]  # the lens darkens the corners, not the material
     photo = cv.image_to_encoded(cv.image_to_linear(photo) * vignetting).astype(np.float32)
     # the start is off by a pattern with no radial trend, so the refinement has something to mend:
@@ -335,12 +335,12 @@ def test_refinement_leaves_the_cameras_vignetting_out_of_the_diffuse(monkeypatch
     assert free > 0.04 and abs(edges_darker(res)) < 0.3 * free and not res.report["kept_start"]
 
 
-def _problem(rng, side=12, priors=None):
+def _problem(rng, side=12, priors=None, weight=None):
     tilt, diffuse, rough, spec = _random_maps(rng, side, np.float32)
     photo = rng.uniform(0.05, 0.6, (side, side, 3)).astype(np.float32)
     init = {"tilt": tilt, "diffuse": np.log(diffuse), "roughness": rough, "specular": spec}
     geo = geometry.CaptureGeometry(camera=(0.1, 0.0, 2.4), light=(0.1, 0.0, 2.4), highlight=(0.1, 0.0))
-    return refine._Problem(photo, init, geo, 3.0, priors or refine.Priors(), side), init
+    return refine._Problem(photo, init, geo, 3.0, priors or refine.Priors(), side, weight), init
 
 
 def test_the_objectives_gradient_matches_finite_differences():
@@ -362,8 +362,7 @@ def test_the_objectives_gradient_matches_finite_differences():
 def test_the_dielectric_prior_holds_f0s_level_not_its_colour():
     rng = np.random.default_rng(2)
     only = refine.Priors(**dict({f: 0.0 for f in refine.Priors.__dataclass_fields__}, dielectric=1.0))
-    prob, init = _problem(rng, priors=only)
-    prob.weight = np.zeros_like(prob.weight)  # the dielectric prior alone
+    prob, init = _problem(rng, priors=only, weight=np.zeros((12, 12, 1), np.float32))  # the dielectric prior alone
     luma = np.asarray(cv.LUMA, np.float32)
     teal = np.array([0.01, 0.05, 0.045], np.float32)
     teal *= cv.DIELECTRIC_F0 / float(teal @ luma)  # a coloured F0 at a dielectric's level
@@ -445,7 +444,7 @@ def test_the_fill_gives_the_clipped_region_its_surroundings_tilt_too():
     unobserved = np.zeros((side, side), bool)
     unobserved[24:40, 24:40] = True
     p["tilt"][unobserved] = 0.0  # ...but not what the photo clipped
-    out = refine._fill_unobserved(start, p, unobserved, refine._radial(side, (0.0, 0.0)), (0.0, 0.0))
+    out = refine._fill_unobserved(start, p, unobserved, refine._Rings(side, (0.0, 0.0)))
     assert np.allclose(out["tilt"][unobserved, 0], 0.1, atol=1e-3)  # no outline of the clipped region left
 
 
@@ -455,8 +454,7 @@ def test_the_tilt_priors_hold_the_starts_relief_not_flatness():
     rng = np.random.default_rng(3)
     side = 32
     tilts = refine.Priors(**dict({f: 0.0 for f in refine.Priors.__dataclass_fields__}, normal=1.0, broad_tilt=10.0))
-    prob, init = _problem(rng, side=side, priors=tilts)
-    prob.weight = np.zeros_like(prob.weight)  # the priors alone
+    prob, init = _problem(rng, side=side, priors=tilts, weight=np.zeros((side, side, 1), np.float32))  # the priors alone
     y, x = np.mgrid[0:side, 0:side] / side
     bump = np.stack([np.sin(2 * np.pi * x), np.cos(2 * np.pi * y)], -1).astype(np.float32) * 0.3
     init["tilt"] = prob.init["tilt"] = bump
