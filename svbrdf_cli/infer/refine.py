@@ -588,6 +588,10 @@ def refine(image, stored, geometry, iterations=DEFAULT_ITERATIONS, priors=None, 
     photo = cv.image_to_linear(np.asarray(image, np.float32)).astype(np.float32)
     side = photo.shape[0]
     start = parameters({k: np.asarray(v, np.float32) for k, v in stored.items()})
+    # in the ranges every step is held to, as the written maps are (:func:`transfer` holds them there): a
+    # chain's F0 under the floor raised before the light's fit and the loss to beat, not at the first step
+    # (F0 0 on a varnished wood: 0.04 added at once doubled the photo's loss, and the start was kept)
+    _project(start)
     weight = _unclipped(photo)  # (once: the intensity's fit and the full-size problem share it)
     intensity = fit_intensity(photo, start, geometry, weight)
     own = highlight.metal_share(image, geometry.light[2])[..., None]  # the photo's coloured highlights
