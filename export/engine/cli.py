@@ -71,7 +71,7 @@ def _setup(threads):
               help="Grow the material bank to this many materials and train on them from now on "
                    "(default: the run's own).")
 @click.option("--weight", "weight_pairs", multiple=True, metavar="NAME=VALUE", callback=lambda ctx, p, v: _weights(v),
-              help="A maps-loss weight from now on (normal, diffuse, roughness, specular, relief, render; 0 drops "
+              help="A maps-loss weight from now on (normal, diffuse, roughness, specular, relief, render, real_f0; 0 drops "
                    "the term), e.g. render=0.5; repeatable. The run keeps it.")
 @click.option("--specular-level", type=click.Choice(SPECULAR_LEVELS), default=None,
               help="The maps stage's F0 target from now on: the material's, or at the photo's flash level as "

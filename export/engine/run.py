@@ -147,7 +147,8 @@ def stage_loss(net, stage, b):
 
 
 def real_loss(net, b):
-    """The rendering loss of the chain's maps on a batch of real photos (earlier stages frozen)."""
+    """The rendering loss of the chain's maps on a batch of real photos (earlier stages frozen), plus
+    ``weights["real_f0"]`` times F0's shortfall under a dielectric's (:func:`export.engine.real.f0_floor_loss`)."""
     photo, light = b["photo"], b["light"]
     context, base = flash.context(light, light, photo.shape[-1]), flash.base(photo, light, light)
     with autocast():
@@ -155,15 +156,19 @@ def real_loss(net, b):
             masks = net.run_masks(photo, context).clamp(0, 1)
             aux = net.run_aux(photo, masks, context).clamp(0, 1)
         pred = net.run_maps(photo, masks, aux, base, context)
-    return real_mod.rendering_loss({k: v.float() for k, v in pred.items()}, photo, light)
+    pred = {k: v.float() for k, v in pred.items()}
+    loss = real_mod.rendering_loss(pred, photo, light)
+    floor = net_weights(net).get("real_f0", 0.0)
+    return loss + floor * real_mod.f0_floor_loss(pred["specular"]) if floor else loss
 
 
 def net_weights(net):
     return getattr(net, "loss_weights", dict(RunConfig.weights))
 
 
-#: Terms of :func:`maps_loss` that are not one map's L1.
-EXTRA_TERMS = ("relief", "render")
+#: Terms of the maps stage's weights that are not one map's L1: :func:`maps_loss`'s ``relief`` and ``render``, and
+#: ``real_f0``, :func:`real_loss`'s.
+EXTRA_TERMS = ("relief", "render", "real_f0")
 #: :func:`render_loss` renders the maps at this side (area-averaged down from the batch's): 4x cheaper
 #: than at 128², and what relighting errors are made of (a highlight's level and spread) is broader.
 RENDER_SIDE = 64

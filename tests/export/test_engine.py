@@ -514,6 +514,30 @@ def test_the_render_term_scores_the_maps_relit_and_trains_the_roughness():
     assert float(maps_loss(dict(truth, roughness=rough), with_lights, weights)) == pytest.approx(plain + 0.5 * float(loss))
 
 
+def test_real_batches_cost_f0_under_a_dielectrics_when_the_run_weighs_it():
+    from export.engine import real
+    from export.engine.run import real_loss
+
+    zero, dielectric, metal = (torch.full((2, 3, 8, 8), v) for v in (0.0, real.F0_FLOOR, 0.8))
+    assert float(real.f0_floor_loss(dielectric)) == pytest.approx(0.0, abs=1e-7)
+    assert float(real.f0_floor_loss(metal)) == 0.0
+    low = zero.clone().requires_grad_(True)
+    real.f0_floor_loss(low).backward()
+    assert float(real.f0_floor_loss(zero)) == pytest.approx(real.F0_FLOOR) and bool((low.grad < 0).all())
+
+    net = _speaking_net()
+    maps = {"normal": cv.encode_normals(torch.tensor([0.0, 0.0, 1.0]).reshape(1, 3, 1, 1).expand(2, 3, 64, 64)),
+            "diffuse": torch.full((2, 3, 64, 64), 0.5), "roughness": torch.full((2, 1, 64, 64), 0.4),
+            "specular": torch.zeros(2, 3, 64, 64)}
+    net.run_maps = lambda *args: maps  # a chain that says F0 is 0
+    g = torch.Generator().manual_seed(0)
+    b = {"photo": torch.rand(2, 3, 64, 64, generator=g) * 0.5, "light": torch.tensor([[0.1, 0.0, 2.4]] * 2)}
+    net.loss_weights = {"real_f0": 0.0}
+    plain = float(real_loss(net, b))
+    net.loss_weights = {"real_f0": 2.0}
+    assert float(real_loss(net, b)) == pytest.approx(plain + 2.0 * real.F0_FLOOR, rel=1e-5)
+
+
 def test_a_weight_given_on_resume_is_the_runs_from_then_on(tmp_path, small_bank):
     from click.testing import CliRunner
 
