@@ -244,6 +244,10 @@ def infer_set(prepared, chain, out_root, opts, model_name="physical", progress=N
         from svbrdf_cli.infer.physical import photo_detail_under_highlight
 
         stored["diffuse"] = photo_detail_under_highlight(stored["diffuse"], high, out["hidden"])
+    if out.get("spot") is not None:  # the photo's detail the diffuse lacks in the flash's spot
+        from svbrdf_cli.infer.physical import photo_detail_in_spot
+
+        stored["diffuse"] = photo_detail_in_spot(stored["diffuse"], high, out["spot"])
     for k, v in stored.items():
         if not np.isfinite(v).all():
             raise SvbrdfError(f"The model produced non-finite values for '{p.path}' ({k}); please report this photo.")

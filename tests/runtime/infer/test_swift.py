@@ -348,6 +348,42 @@ def test_the_photos_fine_detail_under_a_highlight_reaches_the_diffuse():
     np.testing.assert_array_equal(none, stored)
 
 
+def test_the_flash_spot_gets_the_photos_fine_detail_the_diffuse_lacks_and_keeps_its_edges():
+    from svbrdf_cli.imageops import blur, luminance
+    from svbrdf_cli.infer.physical import photo_detail_in_spot, spot_weight
+
+    n = 128
+    rho = _rho(n, foot=(0.0, 0.0))
+    g = np.random.default_rng(8)
+    grain = blur(g.standard_normal((n, n)).astype(np.float32), 0.7)
+    grain /= grain.std()
+    y, x = np.mgrid[0:n, 0:n]
+    hole = np.hypot(x - 0.62 * n, y - 0.5 * n) < 0.09 * n  # a black spot on white plaster, half in the spot
+    albedo = np.where(hole, 0.02, 0.7 * (1 + 0.1 * grain))[..., None] * np.ones(3, np.float32)
+    shading = 1.0 + 0.5 * np.exp(-(rho / 0.5) ** 2)  # the flash's falloff: no highlight on the matte plaster
+    photo = cv.image_to_encoded(np.clip(albedo * 0.6 * shading[..., None], 0, 1)).astype(np.float32)
+    weight = spot_weight(photo, np.zeros((n, n), bool))
+    assert weight.max() == 1.0 and weight[rho > 0.9].max() == 0.0  # the spot, fading to nothing beyond it
+    # the model's diffuse: the plaster's grain smoothed under the flash's centre, the black spot's edge kept
+    smooth = np.where(hole, 0.02, 0.7)[..., None] * np.ones(3, np.float32)
+    diffuse = np.where((rho < 0.45)[..., None], smooth, albedo)
+    stored = cv.albedo_to_stored(diffuse).astype(np.float32)
+    out = cv.albedo_to_linear(photo_detail_in_spot(stored, photo, weight))
+
+    def fine(im):
+        lum = np.log(luminance(im) + 0.01)
+        return lum - blur(lum, 2.0)
+
+    centre = (rho < 0.3) & ~blur(hole.astype(np.float32), 3.0).astype(bool)  # the plaster at the flash's centre
+    truth, before, after = fine(albedo)[centre], fine(diffuse)[centre], fine(out)[centre]
+    assert np.corrcoef(truth, after)[0, 1] > 0.8 and after.std() > 3 * before.std()
+    near = blur(hole.astype(np.float32), 2.0)  # the black spot's edge stays sharp: no grey smeared into it
+    assert luminance(out)[hole & (near < 0.95)].max() < 0.04 and luminance(out)[~hole & (near > 0.05)].min() > 0.45
+    np.testing.assert_allclose(out[weight == 0], cv.albedo_to_linear(stored)[weight == 0], rtol=1e-5)
+    hidden = rho < 0.3  # where the highlight hid the albedo: the fill's, not this step's
+    assert spot_weight(photo, hidden)[hidden].max() == 0.0
+
+
 def test_where_the_chain_guessed_a_metal_its_maps_are_read_as_a_dielectrics():
     from svbrdf_cli.imageops import luminance
     from svbrdf_cli.infer.swift import read_as_dielectric
