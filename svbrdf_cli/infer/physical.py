@@ -613,18 +613,26 @@ def photo_detail_in_spot(diffuse, image, weight):
     wt = np.asarray(weight, np.float32)
     if wt.shape != (h, w):
         wt = cv2.resize(wt, (w, h), interpolation=cv2.INTER_LINEAR)
-    if not (wt > 0).any():
+    rows, cols = np.flatnonzero((wt > 0).any(1)), np.flatnonzero((wt > 0).any(0))
+    if not rows.size:
         return diffuse
     sigma = max(1.0, w / 64.0)
-    d = cv.albedo_to_linear(diffuse)
-    lp = np.log(luminance(cv.image_to_linear(np.asarray(image, np.float32))) + LOG_FLOOR)
+    # on a window round the spot: its rim, the band beyond it as wide, and the blur's reach
+    rim = np.sqrt((wt > 0).sum() / np.pi) - np.sqrt((wt >= 0.99).sum() / np.pi)
+    pad = int(np.ceil(max(rim, 2.0) + 3.0 * sigma)) + 1
+    win = (slice(max(0, rows[0] - pad), min(h, rows[-1] + 1 + pad)), slice(max(0, cols[0] - pad), min(w, cols[-1] + 1 + pad)))
+    wt = wt[win]
+    d = cv.albedo_to_linear(diffuse[win])
+    lp = np.log(luminance(cv.image_to_linear(np.asarray(image, np.float32)[win])) + LOG_FLOOR)
     ld = np.log(luminance(d) + LOG_FLOOR)
     limit = np.log(DETAIL_RANGE)
     own = ld - blur(ld, sigma)
     missing = wt * np.clip((lp - blur(lp, sigma)) - own, -limit, limit)
     missing *= np.float32(_share_within_around(own, missing, wt))
-    out = d * np.exp(missing)[..., None]
-    return cv.albedo_to_stored(np.clip(out, 0.0, 1.0)).astype(np.float32)
+    given = cv.albedo_to_stored(np.clip(d * np.exp(missing)[..., None], 0.0, 1.0)).astype(np.float32)
+    out = diffuse.copy()
+    out[win] = np.where((wt > 0)[..., None], given, diffuse[win])
+    return out
 
 
 #: :func:`_share_within_around` tries these shares of the photo's detail, the largest first.
