@@ -12,6 +12,14 @@ def _rho(n=96, foot=(0.2, -0.1)):
     return np.sqrt((x - foot[0]) ** 2 + (y - foot[1]) ** 2)
 
 
+def _grain(n, seed):
+    """(n, n) fine grain, unit standard deviation."""
+    from svbrdf_cli.imageops import blur
+
+    grain = blur(np.random.default_rng(seed).standard_normal((n, n)).astype(np.float32), 0.7)
+    return grain / grain.std()
+
+
 def _stored(diffuse, roughness):
     n = diffuse.shape[0]
     return {"normal": np.full((n, n, 3), 0.5, np.float32), "diffuse": cv.albedo_to_stored(diffuse).astype(np.float32),
@@ -322,10 +330,7 @@ def test_the_photos_fine_detail_under_a_highlight_reaches_the_diffuse():
     from svbrdf_cli.infer.physical import photo_detail_under_highlight
 
     n = 128
-    rho = _rho(n, foot=(0.0, 0.0))
-    g = np.random.default_rng(5)
-    grain = blur(g.standard_normal((n, n)).astype(np.float32), 0.7)
-    grain /= grain.std()
+    rho, grain = _rho(n, foot=(0.0, 0.0)), _grain(n, 5)
     albedo = (0.3 * (1 + 0.15 * grain))[..., None] * np.array([0.8, 0.6, 0.4], np.float32)
     shading = 1.2 - 0.3 * rho  # the flash's falloff
     lobe = 0.6 * np.exp(-(rho / 0.2) ** 2)  # a smooth white highlight, not clipped
@@ -353,10 +358,7 @@ def test_the_flash_spot_gets_the_photos_fine_detail_the_diffuse_lacks_and_keeps_
     from svbrdf_cli.infer.physical import photo_detail_in_spot, spot_weight
 
     n = 128
-    rho = _rho(n, foot=(0.0, 0.0))
-    g = np.random.default_rng(8)
-    grain = blur(g.standard_normal((n, n)).astype(np.float32), 0.7)
-    grain /= grain.std()
+    rho, grain = _rho(n, foot=(0.0, 0.0)), _grain(n, 8)
     y, x = np.mgrid[0:n, 0:n]
     hole = np.hypot(x - 0.62 * n, y - 0.5 * n) < 0.09 * n  # a black spot on white plaster, half in the spot
     albedo = np.where(hole, 0.02, 0.7 * (1 + 0.1 * grain))[..., None] * np.ones(3, np.float32)
