@@ -258,6 +258,25 @@ def test_the_floor_lifts_the_whole_map_and_keeps_its_variation():
     assert np.allclose(high["specular"], 0.5)  # a map above the floor is left alone
 
 
+def test_a_start_whose_f0_is_under_the_floor_is_refined_from_the_floor_not_kept():
+    # a chain's F0 of 0 on a varnished wood: raised to the floor at the first step, it had doubled the
+    # photo's loss against the start's, and the start was kept (no refinement at all); the start is now
+    # held at the floor before the light's fit and the loss to beat
+    light = (0.1, 0.0, 2.4)
+    photo, truth = _photo(light, camera=light, roughness=0.3, seed=4)
+    # the chain's way: no lobe, its light in a brighter diffuse (the photo's at each pixel)
+    black = np.zeros_like(truth["specular"])
+    without = shading.render_maps(dict(truth, specular=black), light=light)
+    lobe_in = shading.render_maps(truth, light=light) / np.maximum(without, 1e-6)
+    start = _stored(dict(truth, specular=black, diffuse=np.clip(truth["diffuse"] * lobe_in, 0.0, 1.0)))
+    geo = geometry.CaptureGeometry(camera=light, light=light, highlight=light[:2])
+    res = refine.refine(photo, start, geo, 30)
+    assert not res.report["kept_start"]
+    assert res.report["photo_loss_after"] < 0.9 * res.report["photo_loss_before"]
+    f0 = cv.decode_maps(res.stored)["specular"] @ np.asarray(cv.LUMA, np.float32)
+    assert float(f0.mean()) >= cv.DIELECTRIC_F0 - 1e-4
+
+
 def test_the_radial_trend_is_taken_out_and_the_rest_kept():
     side = 64
     radial = refine._Rings(side, (0.2, -0.1))
