@@ -569,8 +569,8 @@ def photo_detail_under_highlight(diffuse, image, hidden):
 
 
 #: :func:`photo_detail_in_spot`: the flash's spot gets the photo's detail fully out to this many times the
-#: radius of the photo's brightest blob (:func:`svbrdf_cli.rectify.highlight.find`; at least
-#: ``highlight.SPOT_MIN_RADIUS`` of the width), none from the second.
+#: radius of the photo's brightest blob (:func:`svbrdf_cli.rectify.highlight.spot_distances`), none from the
+#: second.
 SPOT_DETAIL_RADII = (1.5, 2.5)
 #: :func:`photo_detail_in_spot` compares logarithms of brightness plus this (linear): a dark pixel's sensor
 #: noise is not multiplied into detail.
@@ -582,11 +582,8 @@ def spot_weight(image, hidden):
     detail: the flash's spot (:data:`SPOT_DETAIL_RADII`), fading out over its rim, and not where the highlight
     hid the albedo or the photo clipped (``hidden``, (H, W) bool: those have their own fill), nor within
     1/64 of the width of them."""
-    blob = highlight.find(image)
-    h, w = blob.mask.shape
-    radius = max(np.sqrt(blob.mask.sum() / np.pi), highlight.SPOT_MIN_RADIUS * w) * 2.0 / w  # (surface units)
-    p = cv.surface_positions(h, w)
-    rho = np.hypot(p[..., 0] - blob.centre[0], p[..., 1] - blob.centre[1]) / radius
+    rho, radius = highlight.spot_distances(image)
+    rho, w = rho / radius, rho.shape[1]
     inner, outer = SPOT_DETAIL_RADII
     weight = np.clip((outer - rho) / (outer - inner), 0.0, 1.0)
     if np.any(hidden):

@@ -86,6 +86,16 @@ def _hue(lin):
     return np.arctan2(np.sqrt(3.0) * (lin[..., 1] - lin[..., 2]), 2.0 * lin[..., 0] - lin[..., 1] - lin[..., 2])
 
 
+def spot_distances(image):
+    """(each pixel's distance to the centre of the encoded ``image``'s brightest blob (:func:`find`), (H, W);
+    the blob's radius, at least :data:`SPOT_MIN_RADIUS` of the width), in surface units."""
+    blob = find(image)
+    h, w = blob.mask.shape
+    p = cv.surface_positions(h, w)
+    rho = np.hypot(p[..., 0] - blob.centre[0], p[..., 1] - blob.centre[1])
+    return rho, max(np.sqrt(blob.mask.sum() / np.pi), SPOT_MIN_RADIUS * w) * 2.0 / w
+
+
 def metal_share(image, height, valid=None):
     """(H, W) in [0, 1]: how far each pixel's material reflects the flash in its own colour (a metal's
     highlight), read from the photo's flash spot, per hue.
@@ -113,10 +123,7 @@ def metal_share(image, height, valid=None):
     out = np.zeros((h, w), np.float32)
     if valid is None:
         valid = (img < 0.95 * cv.clip_level(img)).all(-1)
-    blob = find(img)
-    p = cv.surface_positions(h, w)
-    rho = np.hypot(p[..., 0] - blob.centre[0], p[..., 1] - blob.centre[1])
-    radius = max(np.sqrt(blob.mask.sum() / np.pi), SPOT_MIN_RADIUS * w) * 2.0 / w  # (surface units)
+    rho, radius = spot_distances(img)
     d = np.sqrt(rho * rho + height * height)
     falloff = height / d ** 3
     lo, hi = lin.min(-1), lin.max(-1)
