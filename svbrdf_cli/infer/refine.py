@@ -519,20 +519,28 @@ def parameters(stored, keys=PARAMETERS):
 
 def _stored(p):
     """Optimisation parameters (any of :data:`PARAMETERS`) -> stored maps in [0, 1], float32."""
-    lin = {"normal": shading.tilt_to_normal(p["tilt"]) if "tilt" in p else None,
-           "diffuse": np.exp(p["diffuse"]) if "diffuse" in p else None,
-           "roughness": p.get("roughness"), "specular": p.get("specular")}
-    encode = {"normal": cv.encode_normals, "diffuse": cv.albedo_to_stored, "roughness": lambda x: x,
-              "specular": cv.albedo_to_stored}
-    return {k: np.clip(encode[k](v), 0.0, 1.0).astype(np.float32, copy=False) for k, v in lin.items() if v is not None}
+    out = {}
+    if "tilt" in p:
+        out["normal"] = cv.encode_normals(shading.tilt_to_normal(p["tilt"]))
+    if "diffuse" in p:
+        out["diffuse"] = cv.albedo_to_stored(np.exp(p["diffuse"]))
+    if "roughness" in p:
+        out["roughness"] = p["roughness"]
+    if "specular" in p:
+        out["specular"] = cv.albedo_to_stored(p["specular"])
+    return {k: np.clip(v, 0.0, 1.0).astype(np.float32, copy=False) for k, v in out.items()}
+
+
+#: Each parameter's range (:func:`_project`).
+RANGES = {"tilt": (-TILT_LIMIT, TILT_LIMIT), "diffuse": (float(np.log(DIFFUSE_FLOOR)), 0.0), "roughness": ROUGHNESS_RANGE,
+          "specular": SPECULAR_RANGE}
 
 
 def _project(p):
-    """Each of the parameters ``p`` holds (any of :data:`PARAMETERS`) into its range, in place of the dict's."""
-    ranges = {"tilt": (-TILT_LIMIT, TILT_LIMIT), "diffuse": (np.log(DIFFUSE_FLOOR), 0.0), "roughness": ROUGHNESS_RANGE,
-              "specular": SPECULAR_RANGE}
+    """Each of the parameters ``p`` holds (any of :data:`PARAMETERS`) into its range (:data:`RANGES`), in place of
+    the dict's."""
     for k in p:
-        p[k] = np.clip(p[k], *ranges[k])
+        p[k] = np.clip(p[k], *RANGES[k])
     if SPECULAR_FLOOR and "specular" in p:  # grey added to every pixel when the map's mean luminance is under the floor
         short = SPECULAR_FLOOR - float((luminance(p["specular"])).mean())
         if short > 0:
