@@ -1,9 +1,9 @@
 """Training speed of each stage, measured as training runs it (``python -m export.train --benchmark``).
 
-For every stage of a tier: **data** samples/s (:func:`export.engine.batches.make` alone), **step**
+For every stage of a tier, and the whole chain fine-tuned (:data:`export.engine.run.JOINT`): **data** samples/s (:func:`export.engine.batches.make` alone), **step**
 samples/s (the frozen earlier stages' forward passes, the stage's forward, backward and Adam on a
 ready batch) and **loop** samples/s (both, one after the other, as :meth:`export.engine.run.Run.train_step`
-does; for the maps stage, with its share of self-supervised steps on real photos when
+does; for the maps and joint stages, with their share of self-supervised steps on real photos when
 ``../shared/data/real`` is there). All in one process on ``--threads`` threads; the last line is
 ``samples/s=<the slowest stage's loop rate> size=<training size>``.
 
@@ -25,7 +25,7 @@ from export.engine import bank as bank_mod
 from export.engine import keep_memory
 from export.engine import batches, nets
 from export.engine import real as real_mod
-from export.engine.run import RunConfig, real_loss, stage_loss
+from export.engine.run import JOINT, RunConfig, real_loss, stage_loss
 
 
 def _bank(log):
@@ -68,8 +68,8 @@ def measure(tier="swift", size=None, batch=None, repeats=4, log=print):
     net.loss_weights = dict(cfg.weights)
     g = torch.Generator().manual_seed(0)
     rows = []
-    for stage in nets.STAGES:
-        module = getattr(net, stage)
+    for stage in nets.STAGES + (JOINT,):
+        module = net if stage == JOINT else getattr(net, stage)
         opt = torch.optim.Adam(module.parameters(), lr=cfg.lr, betas=(0.5, 0.9), fused=True)
         ready = batches.make(bank, g, batch, size, stage)
 
@@ -83,17 +83,17 @@ def measure(tier="swift", size=None, batch=None, repeats=4, log=print):
         data = rate(lambda: batches.make(bank, g, batch, size, stage), batch, repeats)
         stepped = rate(step, batch, repeats)
         loop = rate(lambda: step(batches.make(bank, g, batch, size, stage)), batch, repeats)
-        real = _real_photos(log) if stage == "maps" and cfg.real_fraction > 0 else None
+        real = _real_photos(log) if stage in ("maps", JOINT) and cfg.real_fraction > 0 else None
         if real:  # as training runs it: a share of the steps are real photos (no rendering of the data)
             def real_step():
                 net.train()
-                loss = real_loss(net, real.batch(g, batch, size))
+                loss = real_loss(net, real.batch(g, batch, size), stage)
                 opt.zero_grad(set_to_none=True)
                 loss.backward()
                 opt.step()
 
             real_rate = rate(real_step, batch, repeats)
-            log(f"maps: real-photo steps {real_rate:.1f}/s, synthetic {loop:.1f}/s")
+            log(f"{stage}: real-photo steps {real_rate:.1f}/s, synthetic {loop:.1f}/s")
             loop = 1.0 / ((1 - cfg.real_fraction) / loop + cfg.real_fraction / real_rate)
         params = sum(p.numel() for p in module.parameters())
         rows.append((stage, params, data, stepped, loop))

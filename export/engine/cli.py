@@ -63,7 +63,8 @@ def _setup(threads):
               help=f"Committed compact checkpoint to resume from when FOLDER holds no state (default {CHECKPOINT}; "
                    "one named here must exist).")
 @click.option("--schedule", default=None, callback=lambda ctx, p, v: _schedule(v),
-              help="Samples per stage, e.g. masks=300000,aux=200000,maps=3000000 (default: the run's own).")
+              help="Samples per stage, e.g. masks=300000,aux=200000,maps=3000000, then joint=N to fine-tune the "
+                   "whole chain (default: the run's own).")
 @click.option("--restart-stage", type=click.Choice(["masks", "aux", "maps"]), default=None,
               help="Train this stage (and those after it) again from its start under the current loss "
                    "settings; the earlier stages and the run's counters are kept.")
@@ -143,17 +144,21 @@ def _weights(pairs):
 
 
 def _schedule(text):
-    """``masks=300000,aux=200000,maps=3000000`` -> the schedule tuple (stages in the chain's order)."""
+    """``masks=300000,aux=200000,maps=3000000[,joint=1000000]`` -> the schedule tuple (stages in the chain's
+    order, then the whole chain fine-tuned if named: :data:`export.engine.run.JOINT`)."""
     if not text:
         return None
     from export.engine.nets import STAGES
+    from export.engine.run import JOINT
 
     try:
         pairs = [(k.strip(), int(v)) for k, v in (item.split("=") for item in text.split(","))]
     except ValueError:
         raise click.BadParameter(f"{text!r}: write stage=samples pairs, e.g. masks=300000,aux=200000,maps=3000000")
-    if [k for k, _ in pairs] != list(STAGES) or any(v <= 0 for _, v in pairs):
-        raise click.BadParameter(f"{text!r}: give every stage ({', '.join(STAGES)}) in that order, each a positive count")
+    names = [k for k, _ in pairs]
+    if names not in (list(STAGES), list(STAGES) + [JOINT]) or any(v <= 0 for _, v in pairs):
+        raise click.BadParameter(f"{text!r}: give every stage ({', '.join(STAGES)}) in that order, each a positive "
+                                 f"count, and {JOINT}=N after them to fine-tune the whole chain")
     return tuple(pairs)
 
 

@@ -88,6 +88,8 @@ class RunConfig:
     #: Where the flash of the networks' context comes from (:data:`export.engine.batches.FLASH_CONTEXTS`): the
     #: true one jittered, or the runtime's fit on the photo.
     flash_context: str = "jitter"
+    #: The :data:`JOINT` stage's learning rate (halved as the others' are): a fine-tune of trained stages.
+    joint_lr: float = 2e-5
 
 
 def _config_from(d):
@@ -129,7 +131,10 @@ def autocast():
 
 
 def stage_loss(net, stage, b):
-    """The loss of ``stage`` on batch ``b`` (earlier stages frozen, under no_grad)."""
+    """The loss of ``stage`` on batch ``b`` (earlier stages frozen, under no_grad; :data:`JOINT`: every
+    stage trained, :func:`joint_loss`)."""
+    if stage == JOINT:
+        return joint_loss(net, b)
     photo, context = b["photo"], b["context"]
     with autocast():
         if stage == "masks":
@@ -146,16 +151,46 @@ def stage_loss(net, stage, b):
     return maps_loss(pred, b, net_weights(net))
 
 
-def real_loss(net, b):
-    """The rendering loss of the chain's maps on a batch of real photos (earlier stages frozen), plus
-    ``weights["real_f0"]`` times F0's shortfall under a dielectric's (:func:`export.engine.real.f0_floor_loss`)."""
+#: The stage after the three of the paper, when a run's schedule names it: the whole chain trained at once
+#: from the stages' weights, its masks and auxiliary renderings still held to their targets
+#: (:func:`joint_loss`), and the real photos' rendering loss reaching them too (:func:`real_loss`).
+JOINT = "joint"
+#: :func:`joint_loss`'s default weights of the masks' squared error and the auxiliary renderings' L1 (a run's
+#: ``masks`` and ``aux`` weights, :data:`EXTRA_TERMS`, override them). At the end of their own stages these
+#: losses were about 0.0015 and 0.05 against the maps' 0.40: weighed so, a drift that doubles either costs a
+#: few percent of the maps' loss.
+INTERMEDIATE = {"masks": 10.0, "aux": 1.0}
+
+
+def _chain(net, photo, context, base, grad):
+    """(masks, aux, maps) of the chain on a batch, the masks and aux unclamped; the earlier stages under
+    no_grad unless ``grad``."""
+    with torch.set_grad_enabled(grad and torch.is_grad_enabled()):
+        masks = net.run_masks(photo, context)
+        aux = net.run_aux(photo, masks.clamp(0, 1), context)
+    return masks, aux, net.run_maps(photo, masks.clamp(0, 1), aux.clamp(0, 1), base, context)
+
+
+def joint_loss(net, b):
+    """The :data:`JOINT` stage's loss on a synthetic batch ``b``: the maps stage's (:func:`maps_loss`) of the
+    chain run end to end, plus the masks' squared error and the auxiliary renderings' L1 against their
+    targets (the paper's intermediate losses, :data:`INTERMEDIATE`), every stage in the gradient."""
+    weights = net_weights(net)
+    with autocast():
+        masks, aux, pred = _chain(net, b["photo"], b["context"], b["base"], grad=True)
+    inter = weights.get("masks", INTERMEDIATE["masks"]) * ((masks.float() - torch.cat([b["M_b"], b["M_h"]], 1)) ** 2).mean()
+    inter = inter + weights.get("aux", INTERMEDIATE["aux"]) * (aux.float() - torch.cat([b[k] for k in AUX_NAMES], 1)).abs().mean()
+    return maps_loss(pred, b, weights) + inter
+
+
+def real_loss(net, b, stage="maps"):
+    """The rendering loss of the chain's maps on a batch of real photos (earlier stages frozen, or in the
+    :data:`JOINT` stage trained too), plus ``weights["real_f0"]`` times F0's shortfall under a dielectric's
+    (:func:`export.engine.real.f0_floor_loss`)."""
     photo, light = b["photo"], b["light"]
     context, base = flash.context(light, light, photo.shape[-1]), flash.base(photo, light, light)
     with autocast():
-        with torch.no_grad():
-            masks = net.run_masks(photo, context).clamp(0, 1)
-            aux = net.run_aux(photo, masks, context).clamp(0, 1)
-        pred = net.run_maps(photo, masks, aux, base, context)
+        pred = _chain(net, photo, context, base, grad=stage == JOINT)[2]
     pred = {k: v.float() for k, v in pred.items()}
     loss = real_mod.rendering_loss(pred, photo, light)
     floor = net_weights(net).get("real_f0", 0.0)
@@ -166,9 +201,9 @@ def net_weights(net):
     return getattr(net, "loss_weights", dict(RunConfig.weights))
 
 
-#: Terms of the maps stage's weights that are not one map's L1: :func:`maps_loss`'s ``relief`` and ``render``, and
-#: ``real_f0``, :func:`real_loss`'s.
-EXTRA_TERMS = ("relief", "render", "real_f0")
+#: Terms of the maps stage's weights that are not one map's L1: :func:`maps_loss`'s ``relief`` and ``render``,
+#: ``real_f0``, :func:`real_loss`'s, and the :data:`JOINT` stage's ``masks`` and ``aux`` (:data:`INTERMEDIATE`).
+EXTRA_TERMS = ("relief", "render", "real_f0", "masks", "aux")
 #: :func:`render_loss` renders the maps at this side (area-averaged down from the batch's): 4x cheaper
 #: than at 128², and what relighting errors are made of (a highlight's level and spread) is broader.
 RENDER_SIDE = 64
@@ -305,11 +340,14 @@ class Run:
         sched = self.config.schedule
         return sched[self.stage_index][0] if self.stage_index < len(sched) else None
 
+    def trained(self):
+        """The module the current stage trains: one stage's network, or for :data:`JOINT` the whole chain."""
+        return self.net if self.stage == JOINT else getattr(self.net, self.stage)
+
     def _optimizer(self):
         if self.stage is None:
             return None
-        module = getattr(self.net, self.stage)
-        return torch.optim.Adam(module.parameters(), lr=self.config.lr, betas=(0.5, 0.9), fused=True)
+        return torch.optim.Adam(self.trained().parameters(), lr=self._lr(), betas=(0.5, 0.9), fused=True)
 
     def state(self):
         return {"model": self.net.state_dict(), "optimizer": self.optimizer.state_dict() if self.optimizer else None,
@@ -353,7 +391,8 @@ class Run:
             torch.manual_seed(self.config.seed)
             fresh = nets.build(self.config.tier)
         for name in names[index:]:
-            getattr(self.net, name).load_state_dict(getattr(fresh, name).state_dict())
+            if name != JOINT:  # (its weights are the stages')
+                getattr(self.net, name).load_state_dict(getattr(fresh, name).state_dict())
         d = RunConfig()
         self.config = dataclasses.replace(self.config, weights=d.weights, real_fraction=d.real_fraction,
                                           real_weight=d.real_weight)
@@ -365,7 +404,8 @@ class Run:
 
     # -- training -----------------------------------------------------------------------------
     def _lr(self):
-        return self.config.lr * 0.5 ** (self.stage_samples // self.config.halve_every)
+        base = self.config.joint_lr if self.stage == JOINT else self.config.lr
+        return base * 0.5 ** (self.stage_samples // self.config.halve_every)
 
     def load_bank(self):
         if self.bank is None:
@@ -395,12 +435,13 @@ class Run:
         same (:mod:`export.engine.prefetch`)."""
         c = self.config
         g = torch.Generator().manual_seed(STEP_SEEDS * (c.seed + 1) + step)
-        real = stage == "maps" and c.real_fraction > 0 and float(torch.rand(1, generator=g)) < c.real_fraction
+        late = stage in ("maps", JOINT)
+        real = late and c.real_fraction > 0 and float(torch.rand(1, generator=g)) < c.real_fraction
         if real and self.load_real():
             return "real", self.real.batch(g, c.batch, c.size)
         b = batches.make(self.load_bank(), g, c.batch, c.size, stage, specular_level=c.specular_level,
                          flash_context=c.flash_context)
-        if stage == "maps" and dict(c.weights).get("render"):
+        if late and dict(c.weights).get("render"):
             b["lights"], b["cameras"] = render_views(g, c.batch)
         return "synthetic", b
 
@@ -414,7 +455,7 @@ class Run:
         for group in self.optimizer.param_groups:
             group["lr"] = self._lr()
         if kind == "real":
-            loss = c.real_weight * real_loss(self.net, b)
+            loss = c.real_weight * real_loss(self.net, b, self.stage)
         else:
             loss = stage_loss(self.net, self.stage, b)
         self.optimizer.zero_grad(set_to_none=True)
@@ -428,8 +469,8 @@ class Run:
         if self.stage_samples >= c.schedule[self.stage_index][1]:
             self.log(f"stage {self.stage} done at {self.stage_samples} samples")
             with self.averaged():  # the stage ends with the weights it is evaluated and exported with
-                finished = {k: v.detach().clone() for k, v in getattr(self.net, self.stage).state_dict().items()}
-            getattr(self.net, self.stage).load_state_dict(finished)
+                finished = {k: v.detach().clone() for k, v in self.trained().state_dict().items()}
+            self.trained().load_state_dict(finished)
             self.stage_index += 1
             self.stage_samples = 0
             self.optimizer = self._optimizer()
@@ -447,7 +488,7 @@ class Run:
         decay = self.config.ema_decay
         if not decay:
             return
-        params = dict(getattr(self.net, self.stage).named_parameters())
+        params = dict(self.trained().named_parameters())
         with torch.no_grad():
             if self.ema is None:
                 self.ema = {k: p.detach().clone() for k, p in params.items()}
@@ -462,8 +503,7 @@ class Run:
         if self.ema is None or self.stage is None:
             yield self.net
             return
-        module = getattr(self.net, self.stage)
-        params = dict(module.named_parameters())
+        params = dict(self.trained().named_parameters())
         saved = {k: p.detach().clone() for k, p in params.items()}
         with torch.no_grad():
             for k, v in self.ema.items():
@@ -504,7 +544,7 @@ class Run:
             from export.engine.prefetch import Prefetcher
 
             self.load_bank()
-            if self.stage == "maps":
+            if self.stage in ("maps", JOINT):
                 self.load_real()
             self.prefetcher = Prefetcher(self.step_batch, self.stage, self.step + 1)
             return None

@@ -473,6 +473,91 @@ def test_a_restarted_stage_starts_again_and_the_run_keeps_its_counts(tmp_path, s
     assert res.exit_code == 2
 
 
+JOINT_CFG = dataclasses.replace(CFG, schedule=CFG.schedule + (("joint", 8),), real_fraction=0.0)
+
+
+def _joint_run(folder, bank_root, **changes):
+    return Run(str(folder), dataclasses.replace(JOINT_CFG, bank_root=bank_root, bank_count=2 * bank_mod.SHARD, **changes),
+               log=lambda m: None, des19=[])
+
+
+def test_the_joint_stage_trains_every_stage_at_its_own_rate(tmp_path, small_bank):
+    run = _joint_run(tmp_path / "run", small_bank, ema_decay=0.0)
+    run.train(steps=7, evaluate=False)  # 3 masks, 2 aux, 2 maps steps
+    assert run.stage == "joint" and run.stage_samples == 0
+    before = {k: v.clone() for k, v in run.net.state_dict().items()}
+    run.train(steps=1, evaluate=False)
+    after = run.net.state_dict()
+    for stage in ("masks", "aux", "maps"):  # the maps stage alone leaves the others as they are
+        assert any(not torch.equal(before[k], after[k]) for k in after if k.startswith(stage + ".")), stage
+    assert run.optimizer.param_groups[0]["lr"] == pytest.approx(JOINT_CFG.joint_lr)
+    run.train(steps=3, evaluate=False)
+    assert run.stage is None and run.stage_samples == 0
+
+
+def test_the_joint_loss_is_the_maps_loss_plus_the_masks_and_aux_held_to_their_targets(small_bank):
+    from export.engine.run import INTERMEDIATE, joint_loss, stage_loss
+
+    net = _speaking_net()
+    b = batches.make(bank_mod.Bank(small_bank), torch.Generator().manual_seed(3), 2, 32, "joint")
+    net.loss_weights = dict(CFG.weights, masks=0.0, aux=0.0)
+    with torch.no_grad():
+        maps_only = float(stage_loss(net, "maps", b))
+        assert float(joint_loss(net, b)) == pytest.approx(maps_only, rel=1e-5)
+        masks = net.run_masks(b["photo"], b["context"])
+        aux = net.run_aux(b["photo"], masks.clamp(0, 1), b["context"])
+        m_err = float(((masks.float() - torch.cat([b["M_b"], b["M_h"]], 1)) ** 2).mean())
+        a_err = float((aux.float() - torch.cat([b["I_bf"], b["I_hr"], b["I_hr2"]], 1)).abs().mean())
+        net.loss_weights = dict(CFG.weights, masks=3.0, aux=2.0)
+        assert float(joint_loss(net, b)) == pytest.approx(maps_only + 3.0 * m_err + 2.0 * a_err, rel=1e-3)
+        net.loss_weights = dict(CFG.weights)  # a run that does not weigh them: the defaults
+        want = maps_only + INTERMEDIATE["masks"] * m_err + INTERMEDIATE["aux"] * a_err
+        assert float(joint_loss(net, b)) == pytest.approx(want, rel=1e-3)
+
+
+def test_real_photos_reach_the_masks_only_in_the_joint_stage():
+    from export.engine.run import real_loss
+
+    net = _speaking_net().train()
+    g = torch.Generator().manual_seed(0)
+    b = {"photo": torch.rand(2, 3, 64, 64, generator=g) * 0.5, "light": torch.tensor([[0.1, 0.0, 2.4]] * 2)}
+    grads = {}
+    for stage in ("maps", "joint"):
+        net.zero_grad(set_to_none=True)
+        real_loss(net, b, stage).backward()
+        grads[stage] = {s: [p.grad for p in getattr(net, s).parameters()] for s in ("masks", "aux", "maps")}
+    assert all(x is None for x in grads["maps"]["masks"] + grads["maps"]["aux"])
+    assert any(x is not None and bool(x.abs().sum() > 0) for x in grads["maps"]["maps"])
+    for s in ("masks", "aux", "maps"):
+        assert any(x is not None and bool(x.abs().sum() > 0) for x in grads["joint"][s]), s
+
+
+def test_a_run_stopped_and_resumed_in_the_joint_stage_equals_the_run_that_never_stopped(tmp_path, small_bank):
+    full = _joint_run(tmp_path / "full", small_bank)
+    full.train(steps=10, evaluate=False)
+    part = _joint_run(tmp_path / "part", small_bank)
+    part.train(steps=8, evaluate=False)  # one joint step in
+    part.save_compact(str(tmp_path / "compact"))
+    del part
+    resumed = Run(str(tmp_path / "elsewhere"), dataclasses.replace(JOINT_CFG, bank_root=small_bank, bank_count=32),
+                  log=lambda m: None, des19=[], checkpoint=str(tmp_path / "compact"))
+    assert resumed.step == 8 and resumed.stage == "joint"
+    resumed.train(steps=2, evaluate=False)
+    a, b = full.net.state_dict(), resumed.net.state_dict()
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    assert set(full.ema) == {k for k, _ in full.net.named_parameters()}  # the average is the whole chain's
+    assert all(torch.equal(full.ema[k], resumed.ema[k]) for k in full.ema)
+
+
+def test_a_schedule_may_end_with_the_joint_stage_and_nowhere_else():
+    from export.engine.cli import _schedule
+
+    assert _schedule("masks=6,aux=2,maps=4,joint=3")[-1] == ("joint", 3)
+    for bad in ("joint=3,masks=6,aux=2,maps=4", "masks=6,aux=2,joint=3,maps=4", "masks=6,aux=2,maps=4,joint=0"):
+        with pytest.raises(Exception, match="joint=N after them"):
+            _schedule(bad)
+
+
 def test_the_relief_term_rewards_the_tilt_pattern_at_any_depth():
     from export.engine.run import relief_loss
 
