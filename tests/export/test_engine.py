@@ -539,14 +539,11 @@ def test_a_run_stopped_and_resumed_in_the_joint_stage_equals_the_run_that_never_
     part.train(steps=8, evaluate=False)  # one joint step in
     part.save_compact(str(tmp_path / "compact"))
     del part
-    resumed = Run(str(tmp_path / "elsewhere"), dataclasses.replace(JOINT_CFG, bank_root=small_bank, bank_count=32),
-                  log=lambda m: None, des19=[], checkpoint=str(tmp_path / "compact"))
+    resumed = _resumed_elsewhere(tmp_path, small_bank, JOINT_CFG)
     assert resumed.step == 8 and resumed.stage == "joint"
     resumed.train(steps=2, evaluate=False)
-    a, b = full.net.state_dict(), resumed.net.state_dict()
-    assert all(torch.equal(a[k], b[k]) for k in a)
+    _assert_the_same_run(full, resumed)
     assert set(full.ema) == {k for k, _ in full.net.named_parameters()}  # the average is the whole chain's
-    assert all(torch.equal(full.ema[k], resumed.ema[k]) for k in full.ema)
 
 
 def test_a_schedule_may_end_with_the_joint_stage_and_nowhere_else():
@@ -685,12 +682,19 @@ def test_a_compact_checkpoint_resumes_the_run_exactly(tmp_path, small_bank):
     assert "manifest.json" in files and sum(f.startswith("part_") for f in files) > 1
     assert not any(k.startswith("maps.") for k in run_mod.read_compact(str(tmp_path / "compact"))["model"])
     del part
-    import dataclasses
-
-    resumed = Run(str(tmp_path / "elsewhere"), dataclasses.replace(CFG, bank_root=small_bank, bank_count=32),
-                  log=lambda m: None, des19=[], checkpoint=str(tmp_path / "compact"))
+    resumed = _resumed_elsewhere(tmp_path, small_bank, CFG)
     assert resumed.step == 4 and resumed.stage == "aux"
     resumed.train(steps=2, evaluate=False)
+    _assert_the_same_run(full, resumed)
+
+
+def _resumed_elsewhere(tmp_path, small_bank, cfg):
+    """A run of ``cfg`` in a new folder, resumed from the compact checkpoint ``tmp_path/compact``."""
+    return Run(str(tmp_path / "elsewhere"), dataclasses.replace(cfg, bank_root=small_bank, bank_count=32),
+               log=lambda m: None, des19=[], checkpoint=str(tmp_path / "compact"))
+
+
+def _assert_the_same_run(full, resumed):
     a, b = full.net.state_dict(), resumed.net.state_dict()
     assert all(torch.equal(a[k], b[k]) for k in a)
     assert full.ema is not None and all(torch.equal(full.ema[k], resumed.ema[k]) for k in full.ema)
