@@ -84,6 +84,25 @@ FOIL_SHARE = 0.5
 RELIEF_METAL_ROUGHNESS = (0.2, 0.7)
 RELIEF_METAL_TILT = (1.0, 2.0)
 RELIEF_METAL_TARNISH = 0.3
+#: Shards of surfaces with relief wider than their texture (:func:`_wavy`: corrugated and ribbed sheets, wavy
+#: plastic, quilted and folded fabric), after the first 19200 materials. Every procedural family draws its
+#: relief at the scale of its texture (a tile, a grain, a pore), and the chain read the corrugated metal sheet
+#: of ``paper_real`` IMG_7303 flat, its ridges' highlights left in the diffuse and no bumpiness in ``M_b``,
+#: where the paper's network draws the corrugation.
+WAVY_SHARDS = range(300, 320)
+#: Families a wavy shard draws its albedo, roughness, F0 and fine relief from, and the share of them metal.
+WAVY_FAMILIES = ("brushed_metal", "metal_plate", "scratched_metal", "plastic_paint", "fabric", "leather", "paper",
+                 "concrete", "wood")
+WAVY_METAL_SHARE = 0.4
+#: A wave's period, a share of the shard's width (log-uniform), and its steepest slope (uniform; 0.6 is 31
+#: degrees); the profile's squareness (a sine at 1, corrugated flanks and flat crests above); the share of
+#: materials with a second, weaker wave across the first (quilted, egg crate).
+WAVY_PERIOD = (0.12, 0.5)
+WAVY_SLOPE = (0.15, 0.6)
+WAVY_SQUARENESS = (1.0, 3.0)
+WAVY_CROSSED = 0.25
+#: The factor (uniform) on a wavy material's own fine relief: a sheet's grain under its wave, not a stone's.
+WAVY_OWN_RELIEF = (0.2, 0.6)
 #: A relief metal is one of these with this probability (gilding, brass and copper foil), else any metal.
 WARM_METALS = ("gold", "copper", "brass", "bronze")
 WARM_SHARE = 0.5
@@ -262,6 +281,40 @@ def _relief_metal(g, n):
     return maps, sources
 
 
+def wave_slopes(g, n, size=SIZE):
+    """(n, 2, size, size) slopes (dh/dx, dh/dy) of one wave each across a square of ``size`` px: a direction
+    uniform on the circle, a period of :data:`WAVY_PERIOD` of the width, a phase, a profile from a sine to
+    corrugated flanks (``clamp(k sin, -1, 1)``, ``k`` in :data:`WAVY_SQUARENESS`), scaled so that its steepest
+    slope is one of :data:`WAVY_SLOPE`."""
+    theta = uniform(g, n, 0.0, 2.0 * math.pi).reshape(-1, 1, 1)
+    period = (log_uniform(g, n, *WAVY_PERIOD) * size).reshape(-1, 1, 1)
+    phase = uniform(g, n, 0.0, 2.0 * math.pi).reshape(-1, 1, 1)
+    k = uniform(g, n, *WAVY_SQUARENESS).reshape(-1, 1, 1)
+    steepest = uniform(g, n, *WAVY_SLOPE).reshape(-1, 1, 1)
+    y, x = torch.meshgrid(torch.arange(size, dtype=torch.float32), torch.arange(size, dtype=torch.float32), indexing="ij")
+    t = 2.0 * math.pi * (x * theta.cos() + y * theta.sin()) / period + phase
+    slope = torch.where((k * t.sin()).abs() < 1.0, k * t.cos(), torch.zeros_like(t)) / k  # h = clamp(k sin t) / k
+    slope = slope * steepest / slope.abs().amax((1, 2), keepdim=True).clamp_min(1e-6)
+    return torch.stack([slope * theta.cos(), slope * theta.sin()], 1)
+
+
+def _wavy(g, n):
+    """``n`` materials of :data:`WAVY_FAMILIES` (:data:`WAVY_METAL_SHARE` metal) on a wave (:func:`wave_slopes`),
+    :data:`WAVY_CROSSED` of them with a second across it at half the slope: the wave's tilt added to each
+    material's own fine relief (times :data:`WAVY_OWN_RELIEF`); albedo, roughness and F0 as the family draws
+    them."""
+    m = procedural.random_materials(g, n, SIZE, device="cpu", families=WAVY_FAMILIES, metal_fraction=WAVY_METAL_SHARE)
+    slopes = wave_slopes(g, n)
+    crossed = (torch.rand(n, generator=g) < WAVY_CROSSED).float().reshape(-1, 1, 1, 1)
+    slopes = slopes + 0.5 * crossed * wave_slopes(g, n)
+    own = uniform(g, n, *WAVY_OWN_RELIEF).reshape(-1, 1, 1, 1)
+    tilt = own * m["normal"][:, :2] / m["normal"][:, 2:].clamp_min(1e-3) + slopes  # (a wave's sign is its phase's)
+    normal = cv.normalize(torch.cat([tilt, torch.ones_like(tilt[:, :1])], 1), axis=1)
+    maps = {k_: m[k_] for k_ in cv.MAP_NAMES}
+    maps["normal"] = normal
+    return maps, [f"wavy:{f}" for f in m["family"]]
+
+
 def _blend_masks(g, n):
     from export.data.dataset import blend_mask
 
@@ -294,6 +347,8 @@ def grow(root=None, target=8000, seed=0, shared=None, progress=print):
             kind = "grey"
         elif index in RELIEF_METAL_SHARDS:
             kind = "relief_metal"
+        elif index in WAVY_SHARDS:
+            kind = "wavy"
         elif u < CC0_FRACTION:
             if cc0_source is None:
                 cc0_source = _Cc0Source(shared)
@@ -307,6 +362,8 @@ def grow(root=None, target=8000, seed=0, shared=None, progress=print):
             drawn = _grey(g, SHARD)
         elif kind == "relief_metal":
             drawn = _relief_metal(g, SHARD)
+        elif kind == "wavy":
+            drawn = _wavy(g, SHARD)
         elif kind == "print":
             m = procedural.random_materials(g, SHARD, SIZE, device="cpu", families=["printed"])
             drawn = {k: m[k] for k in cv.MAP_NAMES}, [f"print:{f}" for f in m["family"]]

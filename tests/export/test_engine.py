@@ -124,10 +124,10 @@ def test_a_bank_grown_past_its_print_shards_holds_prints_and_keeps_its_earlier_s
 
 
 def _grown_with_shard(tmp_path, monkeypatch, kind):
-    """A bank of 3 shards whose third is of ``kind`` ("dark", "grey", "relief_metal"): (its manifest entry, its maps,
+    """A bank of 3 shards whose third is of ``kind`` ("dark", "grey", "relief_metal", "wavy"): (its manifest entry, its maps,
     the first two shards' maps)."""
     for name, k in (("PRINT_SHARDS", "print"), ("DARK_SHARDS", "dark"), ("GREY_SHARDS", "grey"),
-                    ("RELIEF_METAL_SHARDS", "relief_metal")):
+                    ("RELIEF_METAL_SHARDS", "relief_metal"), ("WAVY_SHARDS", "wavy")):
         monkeypatch.setattr(bank_mod, name, range(2, 3) if k == kind else range(0))
     root = str(tmp_path / "bank")
     bank_mod.grow(root, 3 * bank_mod.SHARD, progress=None)
@@ -177,6 +177,36 @@ def test_relief_metal_shards_hold_metals_with_relief_half_of_them_foil_over_a_di
     assert float(metal_share.amin()) < 0.9 and float(metal_share.amax()) > 0.1 and float(metal_share.mean()) > 0.2
     warm = (pure["specular"][:, 2] < 0.8 * pure["specular"][:, 0]).float().mean((1, 2))  # gold, copper, brass, bronze
     assert 0.25 < float((warm > 0.5).float().mean()) < 0.95
+
+
+def test_wavy_shards_hold_relief_wider_than_the_texture_on_metals_and_dielectrics(tmp_path, small_bank, monkeypatch):
+    shard, wavy, rest = _grown_with_shard(tmp_path, monkeypatch, "wavy")
+    assert shard["kind"] == "wavy" and all(x.startswith("wavy:") for x in shard["sources"])
+
+    def tilt(n):
+        return n[:, :2] / n[:, 2:]
+
+    def broad_share(n):  # share of the tilt's variance left in means over blocks of 1/32 of the width
+        t = tilt(n)
+        t = t - t.mean((2, 3), keepdim=True)
+        return float((F.avg_pool2d(t, bank_mod.SIZE // 32) ** 2).mean() / (t ** 2).mean())
+
+    assert broad_share(wavy["normal"]) > 0.5 > 2.5 * broad_share(rest["normal"])  # measured 0.67-0.70, 0.08-0.11
+    steepest = tilt(wavy["normal"]).norm(dim=1).flatten(1).amax(1)
+    assert float(steepest.amin()) > bank_mod.WAVY_SLOPE[0] * 0.8
+    metal = (luminance(wavy["specular"]).flatten(1).mean(1) > 0.25).float().mean()
+    assert 0.15 < float(metal) < 0.7
+
+
+def test_a_wave_has_its_drawn_steepest_slope_and_direction():
+    slopes = bank_mod.wave_slopes(torch.Generator().manual_seed(5), 6, size=128)
+    g = torch.Generator().manual_seed(5)
+    theta = bank_mod.uniform(g, 6, 0.0, 2.0 * np.pi)
+    mag = slopes.norm(dim=1).flatten(1).amax(1)
+    assert bool(((mag >= bank_mod.WAVY_SLOPE[0] - 1e-5) & (mag <= bank_mod.WAVY_SLOPE[1] + 1e-5)).all())
+    direction = torch.stack([theta.cos(), theta.sin()], 1)
+    across = (slopes - (slopes * direction[:, :, None, None]).sum(1, keepdim=True) * direction[:, :, None, None])
+    assert float(across.abs().amax()) < 1e-4  # the slope points along the wave's direction only
 
 
 def test_a_batch_has_what_each_stage_needs(small_bank):
