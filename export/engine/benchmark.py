@@ -25,7 +25,7 @@ from export.engine import bank as bank_mod
 from export.engine import keep_memory
 from export.engine import batches, nets
 from export.engine import real as real_mod
-from export.engine.run import JOINT, RunConfig, real_loss, stage_loss
+from export.engine.run import JOINT, REAL_STAGES, RunConfig, real_loss, stage_loss
 
 
 def _bank(log):
@@ -83,7 +83,7 @@ def measure(tier="swift", size=None, batch=None, repeats=4, log=print):
         data = rate(lambda: batches.make(bank, g, batch, size, stage), batch, repeats)
         stepped = rate(step, batch, repeats)
         loop = rate(lambda: step(batches.make(bank, g, batch, size, stage)), batch, repeats)
-        real = _real_photos(log) if stage in ("maps", JOINT) and cfg.real_fraction > 0 else None
+        real = _real_photos(log) if stage in REAL_STAGES and cfg.real_fraction > 0 else None
         if real:  # as training runs it: a share of the steps are real photos (no rendering of the data)
             def real_step():
                 net.train()

@@ -138,17 +138,23 @@ def stage_loss(net, stage, b):
     photo, context = b["photo"], b["context"]
     with autocast():
         if stage == "masks":
-            pred = net.run_masks(photo, context)
-            return ((pred - torch.cat([b["M_b"], b["M_h"]], 1)) ** 2).mean()
-        with torch.no_grad():
-            masks = net.run_masks(photo, context).clamp(0, 1)
+            return masks_error(net.run_masks(photo, context), b)
         if stage == "aux":
-            pred = net.run_aux(photo, masks, context)
-            return (pred - torch.cat([b[k] for k in AUX_NAMES], 1)).abs().mean()
-        with torch.no_grad():
-            aux = net.run_aux(photo, masks, context).clamp(0, 1)
-        pred = net.run_maps(photo, masks, aux, b["base"], context)
+            with torch.no_grad():
+                masks = net.run_masks(photo, context).clamp(0, 1)
+            return aux_error(net.run_aux(photo, masks, context), b)
+        pred = _chain(net, photo, context, b["base"], grad=False)[2]
     return maps_loss(pred, b, net_weights(net))
+
+
+def masks_error(pred, b):
+    """The masks stage's loss: squared error of the predicted ``M_b``, ``M_h`` against batch ``b``'s."""
+    return ((pred.float() - torch.cat([b["M_b"], b["M_h"]], 1)) ** 2).mean()
+
+
+def aux_error(pred, b):
+    """The aux stage's loss: L1 of the predicted auxiliary renderings against batch ``b``'s."""
+    return (pred.float() - torch.cat([b[k] for k in AUX_NAMES], 1)).abs().mean()
 
 
 #: The stage after the three of the paper, when a run's schedule names it: the whole chain trained at once
@@ -160,6 +166,9 @@ JOINT = "joint"
 #: losses were about 0.0015 and 0.05 against the maps' 0.40: weighed so, a drift that doubles either costs a
 #: few percent of the maps' loss.
 INTERMEDIATE = {"masks": 10.0, "aux": 1.0}
+#: The stages whose steps are a share of real photos (:data:`RunConfig.real_fraction`) and carry the rendering
+#: term's lights and views.
+REAL_STAGES = ("maps", JOINT)
 
 
 def _chain(net, photo, context, base, grad):
@@ -167,8 +176,9 @@ def _chain(net, photo, context, base, grad):
     no_grad unless ``grad``."""
     with torch.set_grad_enabled(grad and torch.is_grad_enabled()):
         masks = net.run_masks(photo, context)
-        aux = net.run_aux(photo, masks.clamp(0, 1), context)
-    return masks, aux, net.run_maps(photo, masks.clamp(0, 1), aux.clamp(0, 1), base, context)
+        seen = masks.clamp(0, 1)
+        aux = net.run_aux(photo, seen, context)
+    return masks, aux, net.run_maps(photo, seen, aux.clamp(0, 1), base, context)
 
 
 def joint_loss(net, b):
@@ -178,9 +188,8 @@ def joint_loss(net, b):
     weights = net_weights(net)
     with autocast():
         masks, aux, pred = _chain(net, b["photo"], b["context"], b["base"], grad=True)
-    inter = weights.get("masks", INTERMEDIATE["masks"]) * ((masks.float() - torch.cat([b["M_b"], b["M_h"]], 1)) ** 2).mean()
-    inter = inter + weights.get("aux", INTERMEDIATE["aux"]) * (aux.float() - torch.cat([b[k] for k in AUX_NAMES], 1)).abs().mean()
-    return maps_loss(pred, b, weights) + inter
+    inter = weights.get("masks", INTERMEDIATE["masks"]) * masks_error(masks, b)
+    return maps_loss(pred, b, weights) + inter + weights.get("aux", INTERMEDIATE["aux"]) * aux_error(aux, b)
 
 
 def real_loss(net, b, stage="maps"):
@@ -435,7 +444,7 @@ class Run:
         same (:mod:`export.engine.prefetch`)."""
         c = self.config
         g = torch.Generator().manual_seed(STEP_SEEDS * (c.seed + 1) + step)
-        late = stage in ("maps", JOINT)
+        late = stage in REAL_STAGES
         real = late and c.real_fraction > 0 and float(torch.rand(1, generator=g)) < c.real_fraction
         if real and self.load_real():
             return "real", self.real.batch(g, c.batch, c.size)
@@ -544,7 +553,7 @@ class Run:
             from export.engine.prefetch import Prefetcher
 
             self.load_bank()
-            if self.stage in ("maps", JOINT):
+            if self.stage in REAL_STAGES:
                 self.load_real()
             self.prefetcher = Prefetcher(self.step_batch, self.stage, self.step + 1)
             return None
