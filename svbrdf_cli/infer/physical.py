@@ -680,6 +680,30 @@ def texture_beside(diffuse, spot):
     return np.roll(relative_texture(luminance(diffuse)), int(cols[-1] - cols[0]) + 3, axis=1).astype(np.float32)
 
 
+def texture_beside_clipped(diffuse, clipped):
+    """The stored ``diffuse`` with, where the photo clipped (``clipped``: an (h, w) mask at any size), its
+    own fine detail (finer than 1/64 of the width) replaced by the detail just beside the clipped pixels
+    (:func:`texture_beside`), at the diffuse's size, over a rim that fades in over 1/256 of the width.
+
+    A clipped photo says nothing of the albedo: a model fills it at its own size (the texture beside at
+    128 px, :func:`svbrdf_cli.infer.swift.fill_highlight`), and brought to the output size that fill is a
+    smooth disc: on the speckled phone back ``paper_real`` IMG_7202 0.40 of the ring's fine detail at
+    1024 px. :func:`photo_detail_under_highlight` has no detail to take there: this is the clone stamp an
+    artist would use. The level under the detail is kept."""
+    import cv2
+
+    diffuse = np.asarray(diffuse, np.float32)
+    h, w = diffuse.shape[:2]
+    bad = cv2.resize(np.asarray(clipped, np.uint8), (w, h), interpolation=cv2.INTER_NEAREST).astype(bool)
+    if not bad.any() or bad.all():
+        return diffuse
+    lin = cv.albedo_to_linear(diffuse)
+    own = relative_texture(luminance(lin))
+    wt = np.clip(blur(bad.astype(np.float32), max(1.0, w / 256.0)) * 2.0 - 1.0, 0.0, 1.0) * bad
+    factor = 1.0 + wt * (texture_beside(lin, bad) / own - 1.0)
+    return cv.albedo_to_stored(np.clip(lin * factor[..., None], 0.0, 1.0)).astype(np.float32)
+
+
 def _residue_spot(img, diffuse):
     """:func:`highlight_residue` of the estimate's ``diffuse`` at the encoded photo ``img``'s highlight, found on
     a copy of at most :data:`FOOT_SIDE` px (like the flash's foot: the blob and the patch are broad shapes, and

@@ -547,7 +547,8 @@ class SwiftModel:
         (:func:`roughness_from_observed`), read as a dielectric's where the chain guessed a metal
         (:func:`read_as_dielectric`), the diffuse's level halfway to the physical estimate's
         (:func:`level_with_estimate`); ``hidden``: where the highlight hid the albedo but the photo
-        did not clip (:func:`hidden_by_highlight`); ``spot``: the flash's spot beyond those, where the
+        did not clip (:func:`hidden_by_highlight`); ``clipped``: where it clipped, given the texture beside at the
+        output size (:func:`svbrdf_cli.infer.physical.texture_beside_clipped`); ``spot``: the flash's spot beyond those, where the
         photo's fine detail the diffuse lacks is given to it at the output size
         (:func:`svbrdf_cli.infer.physical.spot_weight`)."""
         out = self.network(image)
@@ -555,6 +556,7 @@ class SwiftModel:
         hidden, clipped = masks = hidden_by_highlight(image, out["M_h"])
         out["diffuse"] = fill_highlight(out["diffuse"], image, masks=masks)
         out["hidden"] = hidden & ~clipped
+        out["clipped"] = clipped
         from svbrdf_cli.infer.physical import spot_weight
 
         out["spot"] = spot_weight(image, hidden)  # (hidden: the clipped pixels too)

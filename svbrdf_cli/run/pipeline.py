@@ -244,6 +244,10 @@ def infer_set(prepared, chain, out_root, opts, model_name="physical", progress=N
         from svbrdf_cli.infer.physical import photo_detail_under_highlight
 
         stored["diffuse"] = photo_detail_under_highlight(stored["diffuse"], high, out["hidden"])
+    if out.get("clipped") is not None:  # where the photo clipped, the texture just beside
+        from svbrdf_cli.infer.physical import texture_beside_clipped
+
+        stored["diffuse"] = texture_beside_clipped(stored["diffuse"], out["clipped"])
     if out.get("spot") is not None:  # the photo's detail the diffuse lacks in the flash's spot
         from svbrdf_cli.infer.physical import photo_detail_in_spot
 

@@ -353,6 +353,36 @@ def test_the_photos_fine_detail_under_a_highlight_reaches_the_diffuse():
     np.testing.assert_array_equal(none, stored)
 
 
+def test_where_the_photo_clipped_the_diffuse_gets_the_texture_beside_and_keeps_its_level():
+    import cv2
+
+    from svbrdf_cli.imageops import blur, luminance
+    from svbrdf_cli.infer.physical import texture_beside_clipped
+
+    n = 256
+    g = np.random.default_rng(4)
+    grain = 0.3 * (1 + 0.2 * g.standard_normal((n, n)).astype(np.float32))
+    y, x = np.mgrid[0:n, 0:n]
+    clipped = np.hypot(x - n / 2, y - n / 2) < 0.15 * n
+    diffuse = np.where(clipped, blur(grain, 4.0), grain)[..., None] * np.float32([1.0, 0.8, 0.6])  # a smooth fill
+    stored = cv.albedo_to_stored(diffuse).astype(np.float32)
+    small = clipped[::4, ::4]  # the chain's mask, at its own size
+    out = cv.albedo_to_linear(texture_beside_clipped(stored, small))
+
+    def fine(im):
+        lum = luminance(im)
+        return lum - blur(lum, 1.0)
+
+    core = np.hypot(x - n / 2, y - n / 2) < 0.12 * n
+    assert fine(out)[core].std() > 0.7 * fine(diffuse)[~clipped].std() > 3 * fine(diffuse)[core].std()
+    assert abs(luminance(out)[core].mean() / luminance(diffuse)[core].mean() - 1) < 0.05  # the level kept
+    np.testing.assert_allclose(out / out[..., :1], diffuse / diffuse[..., :1], rtol=1e-3)  # and the colour
+    big = cv2.resize(small.astype(np.uint8), (n, n), interpolation=cv2.INTER_NEAREST).astype(bool)
+    np.testing.assert_allclose(out[~big], diffuse[~big], rtol=1e-4)  # the rest as it was
+    none = texture_beside_clipped(stored, np.zeros_like(small))
+    np.testing.assert_array_equal(none, stored)
+
+
 def test_the_flash_spot_gets_the_photos_fine_detail_the_diffuse_lacks_and_keeps_its_edges():
     from svbrdf_cli.imageops import blur, luminance
     from svbrdf_cli.infer.physical import photo_detail_in_spot, spot_weight
