@@ -550,11 +550,9 @@ def photo_detail_under_highlight(diffuse, image, hidden):
     photo's high-pass there is the albedo's detail times the flash's shading, which is read round the
     spot (the photo's local level over the diffuse's) and carried into it. No more detail than the
     diffuse has round the spot is added."""
-    import cv2
-
     diffuse = np.asarray(diffuse, np.float32)
     h, w = diffuse.shape[:2]
-    bad = cv2.resize(np.asarray(hidden, np.uint8), (w, h), interpolation=cv2.INTER_NEAREST).astype(bool)
+    bad = mask_at(hidden, h, w)
     if not bad.any() or bad.all():
         return diffuse
     # on the hidden pixels' bounding box and an eighth of the width round it (their surroundings)
@@ -674,10 +672,22 @@ def _photo_detail(diffuse, image, bad, w):
     return np.where(bad[..., None], out, diffuse)
 
 
+def mask_at(mask, h, w):
+    """The (any size) bool ``mask`` at (``h``, ``w``), nearest neighbour."""
+    import cv2
+
+    return cv2.resize(np.asarray(mask, np.uint8), (w, h), interpolation=cv2.INTER_NEAREST).astype(bool)
+
+
+def _moved_beside(texture, spot):
+    """``texture`` (H, W) moved sideways onto ``spot`` from just beside it (past its columns' span)."""
+    cols = np.flatnonzero(spot.any(0))
+    return np.roll(texture, int(cols[-1] - cols[0]) + 3, axis=1).astype(np.float32)
+
+
 def texture_beside(diffuse, spot):
     """(H, W) relative texture (:func:`relative_texture`) of ``diffuse`` just beside ``spot``, moved onto it."""
-    cols = np.flatnonzero(spot.any(0))
-    return np.roll(relative_texture(luminance(diffuse)), int(cols[-1] - cols[0]) + 3, axis=1).astype(np.float32)
+    return _moved_beside(relative_texture(luminance(diffuse)), spot)
 
 
 def texture_beside_clipped(diffuse, clipped):
@@ -689,19 +699,24 @@ def texture_beside_clipped(diffuse, clipped):
     128 px, :func:`svbrdf_cli.infer.swift.fill_highlight`), and brought to the output size that fill is a
     smooth disc: on the speckled phone back ``paper_real`` IMG_7202 0.40 of the ring's fine detail at
     1024 px. :func:`photo_detail_under_highlight` has no detail to take there: this is the clone stamp an
-    artist would use. The level under the detail is kept."""
-    import cv2
-
+    artist would use. The level under the detail is kept. The texture moves sideways only: the work is done
+    on the clipped pixels' rows and as many as the blurs reach round them, across the whole width."""
     diffuse = np.asarray(diffuse, np.float32)
     h, w = diffuse.shape[:2]
-    bad = cv2.resize(np.asarray(clipped, np.uint8), (w, h), interpolation=cv2.INTER_NEAREST).astype(bool)
+    bad = mask_at(clipped, h, w)
     if not bad.any() or bad.all():
         return diffuse
-    lin = cv.albedo_to_linear(diffuse)
+    rows = np.flatnonzero(bad.any(1))
+    pad = int(4 * max(1.0, w / 64.0)) + 2  # OpenCV's Gaussian reaches 4 sigma
+    band = slice(max(0, rows[0] - pad), min(h, rows[-1] + 1 + pad))
+    lin = cv.albedo_to_linear(diffuse[band])
+    inside = bad[band]
     own = relative_texture(luminance(lin))
-    wt = np.clip(blur(bad.astype(np.float32), max(1.0, w / 256.0)) * 2.0 - 1.0, 0.0, 1.0) * bad
-    factor = 1.0 + wt * (texture_beside(lin, bad) / own - 1.0)
-    return cv.albedo_to_stored(np.clip(lin * factor[..., None], 0.0, 1.0)).astype(np.float32)
+    wt = np.clip(blur(inside.astype(np.float32), max(1.0, w / 256.0)) * 2.0 - 1.0, 0.0, 1.0) * inside
+    factor = 1.0 + wt * (_moved_beside(own, inside) / own - 1.0)
+    out = diffuse.copy()
+    out[band] = cv.albedo_to_stored(np.clip(lin * factor[..., None], 0.0, 1.0))
+    return out
 
 
 def _residue_spot(img, diffuse):
@@ -718,7 +733,7 @@ def _residue_spot(img, diffuse):
         return cv2.resize(np.ascontiguousarray(x, np.float32), (FOOT_SIDE, FOOT_SIDE), interpolation=cv2.INTER_AREA)
 
     spot = highlight_residue(small(diffuse), highlight.find(small(img)))
-    return cv2.resize(spot.astype(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST).astype(bool)
+    return mask_at(spot, h, w)
 
 
 @dataclasses.dataclass
