@@ -210,17 +210,21 @@ def _seeded_kmeans(features, k, every, attempts):
     return cv2.kmeans(features[::every], k, None, crit, attempts, cv2.KMEANS_PP_CENTERS)[2]
 
 
-def chroma_classes(diffuse_lin, k, apart, every=7, attempts=2):
+def chroma_classes(diffuse_lin, k, apart, every=7, attempts=2, share_apart=0.0):
     """(H*W,) int class of each pixel of the linear ``diffuse_lin`` by its chromaticity alone (its log colour
     less the mean of its three channels, which a change of brightness leaves as it is): k-means (on every
-    ``every``-th pixel, ``attempts`` restarts, seeded), a centre closer than ``apart`` (log units) to an
-    earlier one joining that one's class; None when that leaves one class."""
+    ``every``-th pixel, ``attempts`` restarts, seeded), a centre joining an earlier one's class when it is
+    closer than ``apart`` (log units) or when its channels' shares of their sum differ from that one's by
+    less than ``share_apart`` (a near-black channel is far apart in log units and near in share: a red
+    whose blue is 0.003 or 0.006 is one colour); None when that leaves one class."""
     f = _log_colour(diffuse_lin)
     f -= f.mean(1, keepdims=True)
     centres = _seeded_kmeans(f, k, every, attempts)
+    shares = np.exp(centres) / np.exp(centres).sum(1, keepdims=True)
     joined = np.arange(k)
     for i in range(1, k):
-        near = np.flatnonzero(np.linalg.norm(centres[:i] - centres[i], axis=1) < apart)
+        near = np.flatnonzero((np.linalg.norm(centres[:i] - centres[i], axis=1) < apart)
+                              | (np.abs(shares[:i] - shares[i]).max(1) < share_apart))
         if near.size:
             joined[i] = joined[near[0]]
     nearest = ((f[:, None, :] - centres[None]) ** 2).sum(-1).argmin(1)

@@ -32,7 +32,7 @@ import time
 import numpy as np
 
 from svbrdf_cli import conventions as cv
-from svbrdf_cli.imageops import shrink_longest, soft_classes
+from svbrdf_cli.imageops import luminance, shrink_longest, soft_classes
 from svbrdf_cli.infer import flash_fields, tta
 from svbrdf_cli.infer.chain import SWIFT_FILE as FILE
 from svbrdf_cli.infer.chain import ModelError, padding, session
@@ -200,8 +200,10 @@ def hidden_by_highlight(image, highlight=None):
 
 #: :func:`flatten_flash_trends`: the diffuse's colours (k-means on its chromaticity) ...
 TREND_CLASSES = 3
-#: ... of which two closer than this (log units) are one.
+#: ... of which two closer than this (log units) are one, ...
 TREND_CLASSES_APART = 0.25
+#: ... as are two whose channels' shares of their sum differ by less than this.
+TREND_SHARES_APART = 0.08
 
 
 def flatten_flash_trends(stored, rho, names=("diffuse", "roughness")):
@@ -237,15 +239,67 @@ def flatten_flash_trends(stored, rho, names=("diffuse", "roughness")):
     from svbrdf_cli.infer.physical import flatten_radial
 
     albedos = [k for k in ("diffuse", "specular") if k in names]
-    classes = chroma_classes(cv.albedo_to_linear(stored["diffuse"]), TREND_CLASSES, TREND_CLASSES_APART) \
-        if albedos else None
-    out = {k: cv.albedo_to_stored(np.clip(flatten_radial(cv.albedo_to_linear(stored[k]), rho, classes=classes),
-                                          0.0, 1.0)).astype(np.float32)
-           for k in albedos}  # the albedos, in linear units
+    classes = chroma_classes(cv.albedo_to_linear(stored["diffuse"]), TREND_CLASSES, TREND_CLASSES_APART,
+                             share_apart=TREND_SHARES_APART) if albedos else None
+    out = {}
+    for k in albedos:  # the albedos, in linear units
+        flat = flatten_radial(cv.albedo_to_linear(stored[k]), rho, classes=classes)
+        if k == "diffuse":
+            flat = flatten_planar(flat, classes)
+        out[k] = cv.albedo_to_stored(np.clip(flat, 0.0, 1.0)).astype(np.float32)
     if "roughness" in names:
         r = np.repeat(stored["roughness"], 3, -1)
         out["roughness"] = np.clip(flatten_radial(r, rho)[..., :1], 0.0, 1.0).astype(np.float32)
     return out
+
+
+#: :func:`flatten_planar`: the trend's degree in x and y, the pixels it is fitted on (every n-th of
+#: each row and column), its reweighting rounds, and the residual (in robust standard deviations)
+#: beyond which a pixel stops counting (Tukey's biweight).
+PLANAR_DEGREE = 2
+PLANAR_EVERY = 2
+PLANAR_ROUNDS = 5
+PLANAR_REACH = 4.685
+
+
+def flatten_planar(diffuse, classes=None):
+    """(H, W, 3) linear ``diffuse`` with its whole-map trend in x and y divided out, its mean level kept.
+
+    :func:`svbrdf_cli.infer.physical.flatten_radial` divides out a trend round the flash's foot as the
+    physical fit places it; where that foot is off (a photo's dark edge pulls it, vignetting adds to it),
+    a bowl or a tilt across the map is left: on the orange leather ``henzler_train`` IMG_0892, column
+    means 1.12 / 0.92 / 1.15 from left to right and a dark disc in the middle. A flat material's albedo
+    has neither. The log-brightness is fitted by a polynomial of :data:`PLANAR_DEGREE` in x and y plus a
+    level for each colour class (``classes`` of :func:`svbrdf_cli.imageops.chroma_classes`, or one level),
+    robustly (iteratively reweighted, Tukey's biweight on the residuals over their median absolute
+    deviation), so that the material's own pattern is not read as a trend."""
+    h, w = diffuse.shape[:2]
+    logl = np.log(np.maximum(luminance(diffuse), 1e-5)).astype(np.float64)
+    y, x = np.mgrid[0:h, 0:w]
+    x = (x + 0.5) / w * 2 - 1
+    y = (y + 0.5) / h * 2 - 1
+    powers = [(i, d - i) for d in range(1, PLANAR_DEGREE + 1) for i in range(d + 1)]
+    terms = np.stack([x ** i * y ** j for i, j in powers], -1).reshape(-1, len(powers))
+    cls = np.zeros(h * w, np.int64) if classes is None else np.asarray(classes)
+    k = int(cls.max()) + 1
+    pick = np.zeros((h, w), bool)
+    pick[::PLANAR_EVERY, ::PLANAR_EVERY] = True
+    pick = pick.ravel()
+    design = np.concatenate([np.eye(k)[cls[pick]], terms[pick]], 1)
+    target = logl.ravel()[pick]
+    wt = np.ones(target.shape)
+    for _ in range(PLANAR_ROUNDS):
+        sw = np.sqrt(wt)
+        coef = np.linalg.lstsq(design * sw[:, None], target * sw, rcond=None)[0]
+        res = target - design @ coef
+        scale = 1.4826 * float(np.median(np.abs(res))) + 1e-6
+        u = res / (PLANAR_REACH * scale)
+        wt = np.where(np.abs(u) < 1, (1 - u * u) ** 2, 0.0)
+        if wt.sum() < design.shape[1] * 4:
+            return diffuse
+    trend = terms @ coef[k:]
+    trend -= trend.mean()
+    return (diffuse * np.exp(-trend).reshape(h, w, 1)).astype(np.float32)
 
 
 #: :func:`roughness_from_observed`: albedo classes, and the scale (a share of the width) below which

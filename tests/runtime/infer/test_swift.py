@@ -509,3 +509,41 @@ def test_the_chains_diffuse_comes_to_the_photos_size_with_the_photos_own_detail(
     assert wide["diffuse"].shape == (256, 192, 3)
     assert np.allclose(wide["diffuse"], np.clip(cv2.resize(maps["diffuse"][:, :96], (192, 256),
                                                            interpolation=cv2.INTER_CUBIC), 0, 1), atol=1e-6)
+
+
+def test_a_bowl_across_the_map_is_taken_off_and_the_checker_kept():
+    """A bowl and a tilt across the map (a flash foot the physical fit misplaced, vignetting) are no
+    albedo's: :func:`flatten_planar` divides them out, keeping each colour's level and the pattern."""
+    from svbrdf_cli.infer.swift import flatten_planar
+
+    n = 96
+    y, x = np.mgrid[0:n, 0:n]
+    x, y = (x + 0.5) / n * 2 - 1, (y + 0.5) / n * 2 - 1
+    checker = ((x * 4).astype(int) + (y * 4).astype(int)) % 2 == 0
+    albedo = np.where(checker[..., None], np.float32([0.5, 0.3, 0.2]), np.float32([0.1, 0.15, 0.3]))
+    albedo = albedo * (1 + 0.1 * _grain(n, 3))[..., None]
+    bowl = np.exp(0.35 * (x ** 2 + y ** 2) + 0.15 * x)[..., None]
+    classes = checker.ravel().astype(int)
+    flat = flatten_planar((albedo * bowl).astype(np.float32), classes)
+    columns = flat.mean((0, 2))
+    before = (albedo * bowl).mean((0, 2))
+    assert before.max() / before.min() > 1.4
+    assert columns[: n // 3].mean() / columns[n // 3: 2 * n // 3].mean() < 1.04  # it was 1.26
+    assert np.corrcoef(flat[..., 0].ravel(), albedo[..., 0].ravel())[0, 1] > 0.98
+    assert 0.9 < flat.mean() / (albedo * bowl).mean() < 1.1
+
+
+def test_colours_that_differ_only_in_a_near_black_channel_are_one_class():
+    """A red lacquer whose blue is 0.003 in one place and 0.006 in another is 0.7 apart in log units:
+    read as two colours, each ring of the flash's disc got its own level and the disc stayed. Their
+    channels' shares of their sum tell them one colour; a teal and a blue-grey stay apart."""
+    from svbrdf_cli.imageops import chroma_classes
+    from svbrdf_cli.infer.swift import TREND_CLASSES, TREND_CLASSES_APART, TREND_SHARES_APART
+
+    rho = _rho()
+    red = np.where((rho < 0.5)[..., None], np.float32([0.3, 0.02, 0.003]), np.float32([0.3, 0.02, 0.006]))
+    assert chroma_classes(red, TREND_CLASSES, TREND_CLASSES_APART) is not None
+    assert chroma_classes(red, TREND_CLASSES, TREND_CLASSES_APART, share_apart=TREND_SHARES_APART) is None
+    two = np.where((rho < 0.5)[..., None], np.float32([0.05, 0.2, 0.2]), np.float32([0.1, 0.12, 0.2]))
+    classes = chroma_classes(two, TREND_CLASSES, TREND_CLASSES_APART, share_apart=TREND_SHARES_APART)
+    assert classes is not None and classes.max() == 1
