@@ -63,6 +63,14 @@ class NineLights:
         return float(np.mean(errs))
 
     def reference_maps(self):
-        """The capture's reference maps (MaterialGAN's file names), as stored."""
+        """The capture's reference maps (MaterialGAN's file names), as stored here. MaterialGAN writes its
+        roughness gamma-encoded (``rgh.png`` holds roughness^(1/2.2); its renderer is the same GGX as
+        ours), so it is decoded: read as linear, the maps relight the card at 0.170, decoded at 0.0815."""
         files = {"normal": "nom", "diffuse": "dif", "roughness": "rgh", "specular": "spe"}
-        return read_stored_maps(os.path.join(self.folder, "reference_maps"), files)
+        maps = read_stored_maps(os.path.join(self.folder, "reference_maps"), files)
+        maps["roughness"] = (maps["roughness"] ** REFERENCE_ROUGHNESS_GAMMA).astype(np.float32)
+        return maps
+
+
+#: MaterialGAN's roughness encoding: ``rgh.png`` = roughness^(1/this).
+REFERENCE_ROUGHNESS_GAMMA = 2.2
