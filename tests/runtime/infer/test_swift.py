@@ -547,3 +547,26 @@ def test_colours_that_differ_only_in_a_near_black_channel_are_one_class():
     two = np.where((rho < 0.5)[..., None], np.float32([0.05, 0.2, 0.2]), np.float32([0.1, 0.12, 0.2]))
     classes = chroma_classes(two, TREND_CLASSES, TREND_CLASSES_APART, share_apart=TREND_SHARES_APART)
     assert classes is not None and classes.max() == 1
+
+
+def test_a_gold_foil_the_chains_mask_marks_is_kept_and_a_white_highlight_on_the_paper_filled():
+    """``M_h`` marks a gold foil on red paper (``paper_real`` real_cards-red_0): the photo there is gold, not
+    the paper's red plus white, so the chain's gold diffuse is kept; a white highlight on the same paper,
+    marked the same, is filled from the paper round it."""
+    from svbrdf_cli.infer.swift import fill_highlight
+
+    n = 96
+    rho = _rho(n, foot=(0.0, 0.0))
+    g = np.random.default_rng(6)
+    red, gold = np.float32([0.35, 0.06, 0.05]), np.float32([0.45, 0.3, 0.08])
+    spot = rho < 0.2
+    grain = (1 + 0.05 * g.standard_normal((n, n)))[..., None]
+    mask = np.where(spot[..., None], 0.8, 0.0) * np.ones(3, np.float32)
+    foil = np.where(spot[..., None], gold, red) * grain
+    photo = cv.image_to_encoded(np.where(spot[..., None], 1.6 * gold, red) * grain).astype(np.float32)
+    out = cv.albedo_to_linear(fill_highlight(cv.albedo_to_stored(foil).astype(np.float32), photo, mask))
+    assert np.abs(out[spot & (rho < 0.15)].mean(0) - gold).max() < 0.03  # gold, not painted red
+    dim = np.where(spot[..., None], 0.5 * red, red) * grain  # the chain's darker disc under a white highlight
+    photo = cv.image_to_encoded(np.where(spot[..., None], red + 0.4, red) * grain).astype(np.float32)
+    out = cv.albedo_to_linear(fill_highlight(cv.albedo_to_stored(dim).astype(np.float32), photo, mask))
+    assert 0.85 < out[spot].mean() / red.mean() < 1.15  # filled at the paper's level
