@@ -24,6 +24,10 @@ def fit_intensity(rendered, photo):
     return float((r * t).sum()) / max(float((r * r).sum()), 1e-12)
 
 
+#: MaterialGAN's roughness encoding: ``rgh.png`` = roughness^(1/this).
+REFERENCE_ROUGHNESS_GAMMA = 2.2
+
+
 class NineLights:
     """``card_blue_9lights``: 9 rectified photos with known light = camera positions (cm)."""
 
@@ -70,7 +74,3 @@ class NineLights:
         maps = read_stored_maps(os.path.join(self.folder, "reference_maps"), files)
         maps["roughness"] = (maps["roughness"] ** REFERENCE_ROUGHNESS_GAMMA).astype(np.float32)
         return maps
-
-
-#: MaterialGAN's roughness encoding: ``rgh.png`` = roughness^(1/this).
-REFERENCE_ROUGHNESS_GAMMA = 2.2

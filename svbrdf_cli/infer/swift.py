@@ -151,9 +151,10 @@ def fill_highlight(diffuse, image, highlight=None, masks=None):
     # clipped, the texture just beside
     detail = np.where(clipped, texture_beside(lin, mask), relative_texture(luminance(lin)))
     filled = fill_from_surroundings(lin, mask, detail)
-    # where the photo is not the fill's colour plus white, M_h marked another material, not a highlight
-    kept = not_white_over(np.asarray(image, np.float32), filled) * (mask & ~clipped)
-    filled += kept[..., None] * (lin - filled)
+    seen = mask & ~clipped
+    if seen.any():  # where the photo is not the fill's colour plus white, M_h marked another material
+        kept = not_white_over(np.asarray(image, np.float32), filled) * seen
+        filled += kept[..., None] * (lin - filled)
     return cv.albedo_to_stored(np.clip(filled, 0.0, 1.0)).astype(np.float32)
 
 
@@ -178,9 +179,7 @@ def not_white_over(image, fill):
     counts unchanged (only the metal photos' spots move: the red card's fine detail 0.73 -> 0.70)."""
     from svbrdf_cli.imageops import blur
 
-    p = cv.image_to_linear(np.asarray(image, np.float32))
-    p = np.stack([blur(np.ascontiguousarray(p[..., c]), 1.0).reshape(p.shape[:2]) for c in range(3)], -1)
-    p = p.astype(np.float64)
+    p = blur(cv.image_to_linear(np.asarray(image, np.float32)), 1.0).astype(np.float64)
     f = np.asarray(fill, np.float64)
     ff, fs, pf, ps = (f * f).sum(-1), f.sum(-1), (p * f).sum(-1), p.sum(-1)
     det = 3.0 * ff - fs * fs  # the normal equations of [f, 1] against p
@@ -317,11 +316,11 @@ def flatten_planar(diffuse, classes=None):
     photos 0.1426 -> 0.1419), ``export.studies.artist_check``'s counts unchanged. Tried and not kept: this
     step alone, without the radial one (the flash spot's brightness within bounds on 32 -> 29 of 34
     photos); the chromaticity's trends taken off too, per channel (the card 0.1193-0.1195, Des19 level)."""
+    from svbrdf_cli.infer.physical import surface_grid
+
     h, w = diffuse.shape[:2]
     logl = np.log(np.maximum(luminance(diffuse), 1e-5)).astype(np.float64)
-    y, x = np.mgrid[0:h, 0:w]
-    x = (x + 0.5) / w * 2 - 1
-    y = (y + 0.5) / h * 2 - 1
+    x, y = (g.astype(np.float64) for g in surface_grid(h, w))
     powers = [(i, d - i) for d in range(1, PLANAR_DEGREE + 1) for i in range(d + 1)]
     terms = np.stack([x ** i * y ** j for i, j in powers], -1).reshape(-1, len(powers))
     cls = np.zeros(h * w, np.int64) if classes is None else np.asarray(classes)
