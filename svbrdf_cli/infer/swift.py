@@ -78,6 +78,16 @@ PASSES = ((0, False), (2, False))
 #: 0.1225; 192: 0.398, 0.0508, 0.1244; 160 and 192: 0.399, 0.0508, 0.1242. All the maps at 128 and
 #: 160 read the card worse (0.1299 against 0.1262, an earlier runtime).
 NORMAL_SIZES = (160,)
+#: The passes of the normals' reading at :data:`NORMAL_SIZES`: the two quarter turns, the flash turned
+#: with the photo, so that the normals are the mean of four orientations at no more cost than two. The
+#: chain reads relief a little differently in each orientation. Measured with the installed chain
+#: (2,376k) through ``svbrdf capture`` (``capture_eval --all-card``): against :data:`PASSES` there,
+#: Des19 normal 0.0476 -> 0.0474, relief 0.425 -> 0.431, the card 0.1179 -> 0.1177 (its 9 photos
+#: 0.1418 -> 0.1416), the other maps unchanged. The quarter turns read at both sizes (four passes more)
+#: gave 0.0474 / 0.430 and the card 0.1178, with a 12 MP capture 1.22 times as long (``farm-bench``);
+#: at the run's size alone 0.0475 / 0.426. Every map read on the four turns at the run's size: Des19
+#: diffuse 0.0299, roughness 0.1174, but the card 0.1200.
+NORMAL_SIZE_PASSES = ((1, False), (3, False))
 #: The maps whose trend with the distance to the flash's foot is divided out (:func:`flatten_flash_trends`).
 #: The specular too: on a speaker grille (``paper_real`` IMG_7381) the chain's F0 held a pale disc round
 #: the flash, which the glTF preset turned into a metallic disc (mean metallic 0.117, 0.034 with F0
@@ -611,7 +621,7 @@ class SwiftModel:
                              f"({', '.join(cv.SPECULAR_LEVELS)}); update svbrdf or re-export it.")
         self.timings = {}
         self.found = self.fit = None
-        self.passes = PASSES
+        self.passes, self.normal_passes = PASSES, NORMAL_SIZE_PASSES
 
     @property
     def used(self):
@@ -682,14 +692,16 @@ class SwiftModel:
         out = self.run_at(img, light, self.run_size)
         if self.run_size and max(img.shape[:2]) > self.run_size:
             normals = [cv.decode_normals(out["normal"])]
-            normals += [cv.decode_normals(self.run_at(img, light, s, ("normal",))["normal"]) for s in NORMAL_SIZES]
+            normals += [cv.decode_normals(self.run_at(img, light, s, ("normal",), self.normal_passes)["normal"])
+                        for s in NORMAL_SIZES]
             out["normal"] = _unit_normals(sum(normals))
         self.timings = {"physical": t1 - t0, "chain": time.perf_counter() - t1}
         return out
 
-    def run_at(self, img, light, size, names=None):
+    def run_at(self, img, light, size, names=None, passes=None):
         """The chain's outputs for the encoded photo ``img`` with its flash at ``light``, run with the
-        photo area-shrunk to ``size`` (None or larger than the photo: as it is) on :data:`PASSES`,
+        photo area-shrunk to ``size`` (None or larger than the photo: as it is) on ``passes`` (None:
+        ``self.passes``, :data:`PASSES`; (quarter turns, mirror) pairs), averaged and
         brought back to the photo's size (:func:`to_photo_size`): the maps of ``names`` only, or every map and the masks and
         auxiliary renderings (None)."""
         import cv2
@@ -697,26 +709,33 @@ class SwiftModel:
         full = img.shape[:2]
         photo, img = img, shrink_longest(img, size)
         h, w = img.shape[:2]
-        m, pad, mode = padding(h, w, self.multiple, MARGIN)
+        passes = self.passes if passes is None else passes
 
-        def feed(x):
-            return np.ascontiguousarray(np.pad(x, pad, mode=mode).transpose(2, 0, 1)[None], dtype=np.float32)
-
-        def own(x):  # the margin off, (h, w, C)
-            return x[0].transpose(1, 2, 0)[m:m + h, m:m + w]
-
-        total = None
-        for k, mirror in self.passes:
+        def run(k, mirror):  # one pass, brought back to the photo's orientation (a quarter turn swaps h and w)
             seen, at = tta.transform_image(img, k, mirror), tta.transform_point(light, k, mirror)
-            masks, aux, maps = self.forward({"photo": feed(seen), "context": feed(flash_fields.context(at, h, w)),
+            sh, sw = seen.shape[:2]
+            m, pad, mode = padding(sh, sw, self.multiple, MARGIN)
+
+            def feed(x):
+                return np.ascontiguousarray(np.pad(x, pad, mode=mode).transpose(2, 0, 1)[None], dtype=np.float32)
+
+            def own(x):  # the margin off, (sh, sw, C)
+                return x[0].transpose(1, 2, 0)[m:m + sh, m:m + sw]
+
+            masks, aux, maps = self.forward({"photo": feed(seen), "context": feed(flash_fields.context(at, sh, sw)),
                                              "base": feed(flash_fields.base(seen, at))})
             res = tta.untransform_maps(dict(zip(cv.MAP_NAMES, np.split(own(maps), [3, 6, 7], axis=-1))), k, mirror)
             res["extra"] = tta.untransform_image(np.concatenate([own(masks), own(aux)], -1), k, mirror)
+            return res
+
+        total = None
+        for k, mirror in passes:
+            res = run(k, mirror)
             total = res if total is None else {n: total[n] + res[n] for n in total}
-        mean = {n: v / np.float32(len(self.passes)) for n, v in total.items()}
+        mean = {n: v / np.float32(len(passes)) for n, v in total.items()}
 
         out = to_photo_size({n: mean[n] for n in (names or cv.MAP_NAMES)}, img, photo)
-        if "normal" in out and ((h, w) != full or len(self.passes) > 1):  # resized or averaged: unit vectors again
+        if "normal" in out and ((h, w) != full or len(passes) > 1):  # resized or averaged: unit vectors again
             out["normal"] = _unit_normals(cv.decode_normals(out["normal"]))
         if names:
             return out

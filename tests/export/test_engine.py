@@ -799,9 +799,12 @@ def test_the_runtime_runs_the_exported_chain_as_torch_does(tmp_path):
     assert {"M_b.png", "M_h.png", "I_bf.png", "I_hr.png", "I_hr2.png"} <= set(debug), debug
 
 
-def test_the_runtime_averages_the_photo_and_its_half_turn(tmp_path):
-    """The maps are the mean of the chain's on the photo and on the photo turned half round with its flash
-    turned alike (brought back), the normals unit vectors again."""
+@pytest.mark.parametrize("passes", [None, ((1, False), (3, False))])
+@pytest.mark.parametrize("shape", [(96, 96), (64, 96)])
+def test_the_runtime_averages_the_photo_turned(tmp_path, shape, passes):
+    """The maps are the mean of the chain's on the photo turned as each pass says (``PASSES``: as it is
+    and half round), its flash turned alike, brought back; the normals unit vectors again. A photo that
+    is not square too, on the quarter turns (its sides swapped)."""
     pytest.importorskip("onnxruntime")
     from export.engine import onnx as engine_onnx
     from svbrdf_cli.infer import tta
@@ -814,21 +817,23 @@ def test_the_runtime_averages_the_photo_and_its_half_turn(tmp_path):
     engine_onnx.export(net, str(folder / "chain.onnx"), provenance={})
     model = load_model(str(folder))
     g = torch.Generator().manual_seed(4)
-    img = (0.3 + 0.4 * torch.rand(96, 96, 3, generator=g)).numpy()
+    img = (0.3 + 0.4 * torch.rand(*shape, 3, generator=g)).numpy()
     light = np.array([0.2, -0.3, 2.4])
-    model.flash = lambda image: light  # the flash given, so that each pass's is known exactly
-    both = model.network(img)
-    model.passes = ((0, False),)
-    plain = model.network(img)
-    model.flash = lambda image: tta.transform_point(light, 2, False)
-    turned = tta.untransform_maps({k: v for k, v in model.network(tta.transform_image(img, 2, False)).items()
-                                   if k in cv.MAP_NAMES}, 2, False)
+    both = model.run_at(img, light, None, passes=passes)
+    (k1, _), (k2, _) = passes or PASSES
+
+    def turned(k):  # the chain's maps on the photo turned k quarters (one pass), brought back
+        maps = model.run_at(tta.transform_image(img, k, False), tta.transform_point(light, k, False), None,
+                            passes=((0, False),))
+        return tta.untransform_maps({n: v for n, v in maps.items() if n in cv.MAP_NAMES}, k, False)
+
+    one, two = turned(k1), turned(k2)
     for k in ("diffuse", "roughness", "specular"):
-        assert np.abs(both[k] - (plain[k] + turned[k]) / 2).max() < 1e-4, k
-    n = cv.normalize(cv.decode_normals((plain["normal"] + turned["normal"]) / 2))
+        assert np.abs(both[k] - (one[k] + two[k]) / 2).max() < 1e-4, k
+    n = cv.normalize(cv.decode_normals((one["normal"] + two["normal"]) / 2))
     assert np.abs(cv.decode_normals(both["normal"]) - n).max() < 1e-3
     assert np.allclose(np.linalg.norm(cv.decode_normals(both["normal"]), axis=-1), 1.0, atol=1e-4)
-    assert np.abs(plain["diffuse"] - turned["diffuse"]).max() > 1e-3  # the passes differ: the test can fail
+    assert np.abs(one["diffuse"] - two["diffuse"]).max() > 1e-3  # the passes differ: the test can fail
 
 
 def test_the_runtime_runs_the_chain_at_the_size_it_trained_at(tmp_path):
@@ -878,14 +883,14 @@ def test_the_runtime_runs_the_chain_at_the_size_it_trained_at(tmp_path):
 
 def test_the_normals_are_also_read_at_the_normal_sizes_and_averaged(tmp_path):
     """A photo larger than the run's size: the maps are the chain's at the run's size, the normals the
-    unit mean of its normals there and at each of ``NORMAL_SIZES``; a photo no larger than the run's
-    size is read once."""
+    unit mean of its normals there (on ``PASSES``) and at each of ``NORMAL_SIZES`` (on the quarter
+    turns, ``NORMAL_SIZE_PASSES``); a photo no larger than the run's size is read once."""
     pytest.importorskip("onnxruntime")
     from export.engine import onnx as engine_onnx
     from svbrdf_cli.infer import swift
     from svbrdf_cli.infer.registry import load_model
 
-    assert swift.NORMAL_SIZES == (160,)
+    assert swift.NORMAL_SIZES == (160,) and swift.NORMAL_SIZE_PASSES == ((1, False), (3, False))
     net = _speaking_net()
     folder = tmp_path / "swift"
     engine_onnx.export(net, str(folder / "chain.onnx"), provenance={}, run_size=64)
@@ -895,12 +900,14 @@ def test_the_normals_are_also_read_at_the_normal_sizes_and_averaged(tmp_path):
     light = np.array([0.1, 0.2, 2.2])
     model.flash = lambda image: light
     out = model.network(img)
-    at64, at160 = model.run_at(img, light, 64), model.run_at(img, light, 160)
+    at64, at160 = model.run_at(img, light, 64), model.run_at(img, light, 160, passes=swift.NORMAL_SIZE_PASSES)
     for k in ("diffuse", "roughness", "specular", "M_h", "I_hr"):
         assert np.array_equal(out[k], at64[k]), k
     mean = cv.normalize(cv.decode_normals(at64["normal"]) + cv.decode_normals(at160["normal"]))
     assert np.abs(cv.decode_normals(out["normal"]) - mean).max() < 2e-3
     assert np.abs(at64["normal"] - at160["normal"]).max() > 1e-2  # the two readings differ: the test can fail
+    halves = model.run_at(img, light, 160)  # on PASSES: the quarter turns are what is read at 160
+    assert np.abs(halves["normal"] - at160["normal"]).max() > 1e-3
     small = img[:64, :64]
     assert np.array_equal(model.network(small)["normal"], model.run_at(small, light, 64)["normal"])
 
