@@ -2,6 +2,7 @@
 
     python -m export.studies.card_ceiling                       # the default capture
     python -m export.studies.card_ceiling --classes 6 -- --model physical
+    python -m export.studies.card_ceiling --swaps                # the reference's maps swapped in
 
 The card is relit from photo 00's maps under its 8 other lights (:class:`export.render.relight.NineLights`).
 Here photo 00 goes through ``svbrdf capture`` (the options after ``--``), and its maps are refitted with
@@ -16,6 +17,11 @@ intensity the one fitted to the capture's maps on photo 00 and held:
   these normals and this diffuse pattern can relight the card with per-material constants at best.
 
 Printed: the card's relighting RMSE of the capture, of each refit, and each class's fitted values.
+
+With ``--swaps``, instead: the capture relit with one or two of its maps replaced by the card's reference
+maps (:meth:`export.render.relight.NineLights.reference_maps`, fitted by MaterialGAN on all 9 photos),
+and the reference relit with one of the capture's in place of its own (:func:`swaps`): which map holds the
+error, and which maps only work together.
 """
 
 from __future__ import annotations
@@ -89,11 +95,29 @@ def refit(nine, lin, classes, photos):
     return out, values
 
 
+def swaps(score, ours, reference):
+    """{label: ``score(maps)``} of ``ours`` (stored maps), of ``ours`` with each one map and each pair of maps
+    of ``reference``, and of ``reference`` with each one of ``ours``."""
+    import itertools
+
+    from svbrdf_cli.conventions import MAP_NAMES
+
+    out = {"capture": score(ours), "reference": score(reference)}
+    for k in (1, 2):
+        for names in itertools.combinations(MAP_NAMES, k):
+            out["capture with the reference's " + " and ".join(names)] = score({**ours, **{n: reference[n] for n in names}})
+    for name in MAP_NAMES:
+        out[f"reference with the capture's {name}"] = score({**reference, name: ours[name]})
+    return out
+
+
 @click.command(context_settings={"show_default": True})
 @click.option("--classes", default=4, help="Soft classes of the diffuse's colour, each refitted with its own numbers.")
 @click.option("--threads", default=1, help="torch threads.")
+@click.option("--swaps", "swap", is_flag=True, help="Instead: the capture relit with the reference's maps swapped in, one "
+                                            "or two at a time, and the reference with each of the capture's.")
 @click.argument("options", nargs=-1, type=click.UNPROCESSED)
-def cli(classes, threads, options):
+def cli(classes, threads, swap, options):
     """The card relit from photo 00's capture (``svbrdf capture OPTIONS``) and from its per-class refits."""
     import torch
 
@@ -108,6 +132,15 @@ def cli(classes, threads, options):
         with tempfile.TemporaryDirectory() as tmp:
             capture([os.path.join(folder, "00.jpg")], tmp, options, "none")
             stored = read_stored_maps(os.path.join(tmp, "00"))
+        if swap:
+            import cv2
+
+            side = stored["diffuse"].shape[1]
+            reference = {n: cv2.resize(v, (side, side), interpolation=cv2.INTER_AREA).reshape(side, side, -1)
+                         for n, v in nine.reference_maps().items()}
+            for label, value in swaps(nine.relight_rmse, stored, reference).items():
+                click.echo(f"{label}: {value:.4f}")
+            return
         lin = stored_to_linear(stored)
         p = soft_classes(lin["diffuse"], classes)
         click.echo(f"the capture: {nine.relight_rmse(stored):.4f}")

@@ -63,3 +63,21 @@ def test_a_refit_on_every_photo_finds_each_materials_gloss_and_relights_better()
     assert red > 2 * blue  # the gold's own colour (its truth: 0.9, 0.6, 0.2)
     assert set(values) == {"F0", "roughness", "diffuse factor"} and values["F0"].shape == (2, 3)
     assert all(np.isfinite(v).all() for v in linear_to_stored(maps).values())
+
+
+def test_the_swaps_score_each_map_of_the_reference_in_the_capture_and_back():
+    """``swaps``: the capture with one or two of the reference's maps, the reference with one of the
+    capture's; the score sees which map is swapped (here the sum of each map's mean over its channels)."""
+    ours = {n: np.full((4, 4, c), v, np.float32)
+            for (n, c), v in zip((("normal", 3), ("diffuse", 3), ("roughness", 1), ("specular", 3)), (1, 2, 4, 8))}
+    reference = {n: np.zeros_like(v) for n, v in ours.items()}
+
+    def score(maps):
+        return float(sum(v.mean() for v in maps.values()))
+
+    out = cc.swaps(score, ours, reference)
+    assert out["capture"] == 15 and out["reference"] == 0
+    assert out["capture with the reference's roughness"] == 11
+    assert out["capture with the reference's normal and specular"] == 6
+    assert out["reference with the capture's diffuse"] == 2
+    assert len(out) == 2 + 4 + 6 + 4
