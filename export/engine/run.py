@@ -801,12 +801,12 @@ def predict(net, photo, camera, light, size=None):
 def runtime_twin(net, size):
     """``net`` as :class:`svbrdf_cli.infer.swift.SwiftModel` runs an export of it, on photos of any size
     (flash fit, the network at ``size``, the physical steps after it), torch in place of onnxruntime."""
-    from svbrdf_cli.infer.swift import NORMAL_SIZE_PASSES, PASSES, SwiftModel
+    from svbrdf_cli.infer.swift import PASSES, SECOND_PASSES, SwiftModel
 
     class Twin(SwiftModel):
         def __init__(self):  # what SwiftModel reads from an export's metadata
             self.multiple, self.run_size, self.timings, self.found, self.fit = 32, size, {}, None, None
-            self.passes, self.normal_passes = PASSES, NORMAL_SIZE_PASSES
+            self.passes, self.second_passes = PASSES, SECOND_PASSES
 
         @torch.no_grad()
         def forward(self, feeds):

@@ -69,25 +69,32 @@ MARGIN = 16
 #: the 48 generated known-light captures 0.0731 -> 0.0722. Mirrored passes read Des19 as well but the
 #: card worse (0.1282-0.1286).
 PASSES = ((0, False), (2, False))
-#: Sizes (px) at which the chain also reads the normals (on :data:`PASSES`), averaged with its reading at
-#: the run's size; the other maps are the run size's. A photo's relief shows at more than one scale, and
-#: the chain, trained at 128 px, reads each a little differently. Measured with the installed chain
-#: through ``svbrdf capture`` (``capture_eval --all-card``; 48 generated known-light captures): with
-#: none, Des19 normal 0.0505, relief 0.382, the card 0.1233 (9 inputs 0.1497), known lights 0.0731;
-#: with 160, 0.0505, **0.395**, 0.1235 (0.1498), 0.0728. With 96 instead: relief 0.371, the card
-#: 0.1225; 192: 0.398, 0.0508, 0.1244; 160 and 192: 0.399, 0.0508, 0.1242. All the maps at 128 and
-#: 160 read the card worse (0.1299 against 0.1262, an earlier runtime).
-NORMAL_SIZES = (160,)
-#: The passes of the normals' reading at :data:`NORMAL_SIZES`: the two quarter turns, the flash turned
-#: with the photo, so that the normals are the mean of four orientations at no more cost than two. The
-#: chain reads relief a little differently in each orientation. Measured with the installed chain
-#: (2,376k) through ``svbrdf capture`` (``capture_eval --all-card``): against :data:`PASSES` there,
-#: Des19 normal 0.0476 -> 0.0474, relief 0.425 -> 0.431, the card 0.1179 -> 0.1177 (its 9 photos
-#: 0.1418 -> 0.1416), the other maps unchanged. The quarter turns read at both sizes (four passes more)
-#: gave 0.0474 / 0.430 and the card 0.1178, with a 12 MP capture 1.22 times as long (``farm-bench``);
-#: at the run's size alone 0.0475 / 0.426. Every map read on the four turns at the run's size: Des19
-#: diffuse 0.0299, roughness 0.1174, but the card 0.1200.
-NORMAL_SIZE_PASSES = ((1, False), (3, False))
+#: Sizes (px) at which the chain reads the photo a second time, for :data:`SECOND_MAPS` only, averaged
+#: with its reading at the run's size; the other maps are the run size's. A photo's relief shows at more
+#: than one scale, and the chain, trained at 128 px, reads each a little differently. Measured for the
+#: normals with the installed chain through ``svbrdf capture`` (``capture_eval --all-card``; 48 generated
+#: known-light captures): with none, Des19 normal 0.0505, relief 0.382, the card 0.1233 (9 inputs
+#: 0.1497), known lights 0.0731; with 160, 0.0505, **0.395**, 0.1235 (0.1498), 0.0728. With 96 instead:
+#: relief 0.371, the card 0.1225; 192: 0.398, 0.0508, 0.1244; 160 and 192: 0.399, 0.0508, 0.1242. All
+#: the maps at 128 and 160 read the card worse (0.1299 against 0.1262, an earlier runtime).
+SECOND_SIZES = (160,)
+#: The passes of the reading at :data:`SECOND_SIZES`: the two quarter turns, the flash turned with the
+#: photo, so that the normals are the mean of four orientations at no more cost than two. The chain reads
+#: relief a little differently in each orientation. Measured with the installed chain (2,376k) through
+#: ``svbrdf capture`` (``capture_eval --all-card``): against :data:`PASSES` there, Des19 normal 0.0476 ->
+#: 0.0474, relief 0.425 -> 0.431, the card 0.1179 -> 0.1177 (its 9 photos 0.1418 -> 0.1416), the other
+#: maps unchanged. The quarter turns read at both sizes (four passes more) gave 0.0474 / 0.430 and the
+#: card 0.1178, with a 12 MP capture 1.22 times as long (``farm-bench``); at the run's size alone 0.0475
+#: / 0.426. Every map read on the four turns at the run's size: Des19 diffuse 0.0299, roughness 0.1174,
+#: but the card 0.1200.
+SECOND_PASSES = ((1, False), (3, False))
+#: The maps averaged over the run size's reading and :data:`SECOND_SIZES`' (the others: the run size's).
+#: The specular too (measured as above, the normals' two readings kept): Des19 specular 0.0578 -> 0.0569,
+#: diffuse 0.0303 -> 0.0301, the card 0.1177 -> 0.1176 (9 photos 0.1416), the 48 known-light captures and
+#: the artist check unchanged (0.0543, 5 of 48 worse than the floor; 27 of 27 dielectrics without false
+#: metal). The diffuse too: Des19 0.0298 but the card 0.1187 (9 photos 0.1424); the roughness: Des19
+#: 0.1151 but the card 0.1231 (9 photos 0.1467).
+SECOND_MAPS = ("normal", "specular")
 #: The maps whose trend with the distance to the flash's foot is divided out (:func:`flatten_flash_trends`).
 #: The specular too: on a speaker grille (``paper_real`` IMG_7381) the chain's F0 held a pale disc round
 #: the flash, which the glTF preset turned into a metallic disc (mean metallic 0.117, 0.034 with F0
@@ -621,7 +628,7 @@ class SwiftModel:
                              f"({', '.join(cv.SPECULAR_LEVELS)}); update svbrdf or re-export it.")
         self.timings = {}
         self.found = self.fit = None
-        self.passes, self.normal_passes = PASSES, NORMAL_SIZE_PASSES
+        self.passes, self.second_passes = PASSES, SECOND_PASSES
 
     @property
     def used(self):
@@ -682,7 +689,8 @@ class SwiftModel:
 
     def network(self, image):
         """The chain's own outputs for an (H, W, 3) encoded photo, at the photo's size: its maps and
-        extras at the run's size, its normals averaged with those it reads at :data:`NORMAL_SIZES`."""
+        extras at the run's size, its :data:`SECOND_MAPS` averaged with those it reads at :data:`SECOND_SIZES`
+        (the normals as unit vectors)."""
         img = np.asarray(image, dtype=np.float32)
         if img.ndim != 3 or img.shape[-1] != 3:
             raise ValueError(f"expected an (H, W, 3) image, got shape {img.shape}")
@@ -691,10 +699,12 @@ class SwiftModel:
         t1 = time.perf_counter()
         out = self.run_at(img, light, self.run_size)
         if self.run_size and max(img.shape[:2]) > self.run_size:
-            normals = [cv.decode_normals(out["normal"])]
-            normals += [cv.decode_normals(self.run_at(img, light, s, ("normal",), self.normal_passes)["normal"])
-                        for s in NORMAL_SIZES]
-            out["normal"] = _unit_normals(sum(normals))
+            reads = [out] + [self.run_at(img, light, s, SECOND_MAPS, self.second_passes) for s in SECOND_SIZES]
+            for name in SECOND_MAPS:
+                if name == "normal":
+                    out[name] = _unit_normals(sum(cv.decode_normals(r[name]) for r in reads))
+                else:
+                    out[name] = sum(r[name] for r in reads) / np.float32(len(reads))
         self.timings = {"physical": t1 - t0, "chain": time.perf_counter() - t1}
         return out
 
