@@ -267,6 +267,48 @@ def fit_lobe(lum, clipped, rho, geo):
     return Lobe(r, float(c0[i]), float(c1[i]), h, 1.0 - res / max(res_flat, 1e-20))
 
 
+#: :func:`planar_trend`: the trend's degree in x and y, the pixels it is fitted on (every n-th of each row
+#: and column), its reweighting rounds, and the residual (in robust standard deviations) beyond which a
+#: pixel stops counting (Tukey's biweight).
+PLANAR_DEGREE = 2
+PLANAR_EVERY = 2
+PLANAR_ROUNDS = 5
+PLANAR_REACH = 4.685
+
+
+def planar_trend(logl, classes=None):
+    """(H, W) float64 trend in x and y of the (H, W) map ``logl`` (a log-brightness), its mean 0; None when
+    too few pixels are left to fit it.
+
+    A polynomial of :data:`PLANAR_DEGREE` in the surface's x and y plus a level for each class (``classes``,
+    (H*W,) int, of :func:`svbrdf_cli.imageops.chroma_classes`; None: one level), fitted robustly (iteratively
+    reweighted, Tukey's biweight on the residuals over their median absolute deviation), so that a
+    material's own pattern and its colours are not read as the trend."""
+    h, w = logl.shape
+    x, y = (g.astype(np.float64) for g in surface_grid(h, w))
+    powers = [(i, d - i) for d in range(1, PLANAR_DEGREE + 1) for i in range(d + 1)]
+    terms = np.stack([x ** i * y ** j for i, j in powers], -1).reshape(-1, len(powers))
+    cls = np.zeros(h * w, np.int64) if classes is None else np.asarray(classes)
+    k = int(cls.max()) + 1
+    pick = np.zeros((h, w), bool)
+    pick[::PLANAR_EVERY, ::PLANAR_EVERY] = True
+    pick = pick.ravel()
+    design = np.concatenate([np.eye(k)[cls[pick]], terms[pick]], 1)
+    target = np.asarray(logl, np.float64).ravel()[pick]
+    wt = np.ones(target.shape)
+    for _ in range(PLANAR_ROUNDS):
+        sw = np.sqrt(wt)
+        coef = np.linalg.lstsq(design * sw[:, None], target * sw, rcond=None)[0]
+        res = target - design @ coef
+        scale = 1.4826 * float(np.median(np.abs(res))) + 1e-6
+        u = res / (PLANAR_REACH * scale)
+        wt = np.where(np.abs(u) < 1, (1 - u * u) ** 2, 0.0)
+        if wt.sum() < design.shape[1] * 4:
+            return None
+    trend = terms @ coef[k:]
+    return (trend - trend.mean()).reshape(h, w)
+
+
 def flatten_radial(diffuse, rho, rings=PROFILE_RINGS // 2, weights=None, classes=None):
     """Divide out what is left of the flash in the diffuse: its log-brightness as a function of the
     distance to the foot (each ring's trimmed mean, :data:`RING_QUANTILES`), smoothed, relative to the

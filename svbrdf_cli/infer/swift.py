@@ -310,15 +310,6 @@ def flatten_flash_trends(stored, rho, names=("diffuse", "roughness")):
     return out
 
 
-#: :func:`flatten_planar`: the trend's degree in x and y, the pixels it is fitted on (every n-th of
-#: each row and column), its reweighting rounds, and the residual (in robust standard deviations)
-#: beyond which a pixel stops counting (Tukey's biweight).
-PLANAR_DEGREE = 2
-PLANAR_EVERY = 2
-PLANAR_ROUNDS = 5
-PLANAR_REACH = 4.685
-
-
 def flatten_planar(diffuse, classes=None):
     """(H, W, 3) linear ``diffuse`` with its whole-map trend in x and y divided out, its mean level kept.
 
@@ -326,40 +317,19 @@ def flatten_planar(diffuse, classes=None):
     physical fit places it; where that foot is off (a photo's dark edge pulls it, vignetting adds to it),
     a bowl or a tilt across the map is left: on the orange leather ``henzler_train`` IMG_0892, column
     means 1.12 / 0.92 / 1.15 from left to right and a dark disc in the middle. A flat material's albedo
-    has neither. The log-brightness is fitted by a polynomial of :data:`PLANAR_DEGREE` in x and y plus a
-    level for each colour class (``classes`` of :func:`svbrdf_cli.imageops.chroma_classes`, or one level),
-    robustly (iteratively reweighted, Tukey's biweight on the residuals over their median absolute
-    deviation), so that the material's own pattern is not read as a trend. Measured through ``svbrdf
-    capture``: Des19 diffuse 0.0313 -> 0.0303, roughness 0.1277 -> 0.1269, the card 0.1187 -> 0.1189 (9
-    photos 0.1426 -> 0.1419), ``export.studies.artist_check``'s counts unchanged. Tried and not kept: this
-    step alone, without the radial one (the flash spot's brightness within bounds on 32 -> 29 of 34
-    photos); the chromaticity's trends taken off too, per channel (the card 0.1193-0.1195, Des19 level)."""
-    from svbrdf_cli.infer.physical import surface_grid
+    has neither. The trend is :func:`svbrdf_cli.infer.physical.planar_trend`'s of the log-brightness, a level
+    for each colour class (``classes`` of :func:`svbrdf_cli.imageops.chroma_classes`, or one level).
+    Measured through ``svbrdf capture``: Des19 diffuse 0.0313 -> 0.0303, roughness 0.1277 -> 0.1269, the card
+    0.1187 -> 0.1189 (9 photos 0.1426 -> 0.1419), ``export.studies.artist_check``'s counts unchanged. Tried
+    and not kept: this step alone, without the radial one (the flash spot's brightness within bounds on 32
+    -> 29 of 34 photos); the chromaticity's trends taken off too, per channel (the card 0.1193-0.1195, Des19
+    level)."""
+    from svbrdf_cli.infer.physical import planar_trend
 
     h, w = diffuse.shape[:2]
-    logl = np.log(np.maximum(luminance(diffuse), 1e-5)).astype(np.float64)
-    x, y = (g.astype(np.float64) for g in surface_grid(h, w))
-    powers = [(i, d - i) for d in range(1, PLANAR_DEGREE + 1) for i in range(d + 1)]
-    terms = np.stack([x ** i * y ** j for i, j in powers], -1).reshape(-1, len(powers))
-    cls = np.zeros(h * w, np.int64) if classes is None else np.asarray(classes)
-    k = int(cls.max()) + 1
-    pick = np.zeros((h, w), bool)
-    pick[::PLANAR_EVERY, ::PLANAR_EVERY] = True
-    pick = pick.ravel()
-    design = np.concatenate([np.eye(k)[cls[pick]], terms[pick]], 1)
-    target = logl.ravel()[pick]
-    wt = np.ones(target.shape)
-    for _ in range(PLANAR_ROUNDS):
-        sw = np.sqrt(wt)
-        coef = np.linalg.lstsq(design * sw[:, None], target * sw, rcond=None)[0]
-        res = target - design @ coef
-        scale = 1.4826 * float(np.median(np.abs(res))) + 1e-6
-        u = res / (PLANAR_REACH * scale)
-        wt = np.where(np.abs(u) < 1, (1 - u * u) ** 2, 0.0)
-        if wt.sum() < design.shape[1] * 4:
-            return diffuse
-    trend = terms @ coef[k:]
-    trend -= trend.mean()
+    trend = planar_trend(np.log(np.maximum(luminance(diffuse), 1e-5)), classes)
+    if trend is None:
+        return diffuse
     return (diffuse * np.exp(-trend).reshape(h, w, 1)).astype(np.float32)
 
 

@@ -347,6 +347,7 @@ def test_refinement_leaves_the_cameras_vignetting_out_of_the_diffuse(monkeypatch
         change = np.log(cv.decode_maps(res.stored)["diffuse"].mean(-1) / truth["diffuse"].mean(-1))
         return float(change[rho < 0.3].mean() - change[rho > 1.0].mean())
 
+    monkeypatch.setattr(refine, "_without_planar_trend", lambda start, p: p)  # the radial step alone
     monkeypatch.setattr(refine, "RADIAL_FREE", ("roughness", "specular"))
     free = edges_darker(refine.refine(photo, start, geo, 40))
     monkeypatch.setattr(refine, "RADIAL_FREE", ("diffuse", "roughness", "specular"))
@@ -553,3 +554,27 @@ def test_the_roughness_change_is_one_value_per_class_read_where_the_lobe_is():
     out = refine._per_class(change, basis)[..., 0]
     assert np.allclose(out[:, : side // 2], -0.1, atol=0.003)  # the whole class takes what the lobe showed
     assert np.allclose(out[:, side // 2:], 0.0, atol=0.003)  # a class the lobe never reached keeps none
+
+
+def test_refinement_leaves_no_bowl_round_the_photos_centre_when_the_flash_is_off_it(monkeypatch):
+    """Vignetting is centred on the lens, not on the highlight: with the flash off-centre the radial step
+    leaves it, and the change's trend in x and y goes at the end (:func:`refine._without_planar_trend`)."""
+    light = (0.7, 0.6, 2.4)
+    photo, truth = _photo(light, camera=(0.0, 0.0, 2.4), seed=5)
+    centre = refine._Rings(256, (0.0, 0.0)).rho
+    vignetting = (1.0 - 0.5 * (centre / centre.max()) ** 2)[..., None]
+    photo = cv.image_to_encoded(cv.image_to_linear(photo) * vignetting).astype(np.float32)
+    yy, xx = np.mgrid[0:256, 0:256] * (2 * np.pi / 64)
+    pattern = (1.0 + 0.3 * np.sin(xx) * np.sin(yy))[..., None].astype(np.float32)
+    start = _stored(dict(truth, diffuse=truth["diffuse"] * pattern))
+    geo = geometry.CaptureGeometry(camera=(0.0, 0.0, 2.4), light=light, highlight=(0.35, 0.3))
+
+    def bowl(res):
+        change = np.log(cv.decode_maps(res.stored)["diffuse"].mean(-1) / truth["diffuse"].mean(-1))
+        return float(change[centre < 0.3].mean() - change[centre > 1.0].mean())
+
+    with monkeypatch.context() as m:
+        m.setattr(refine, "_without_planar_trend", lambda start, p: p)
+        left = bowl(refine.refine(photo, start, geo, 40))
+    res = refine.refine(photo, start, geo, 40)
+    assert left > 0.04 and abs(bowl(res)) < 0.3 * left and not res.report["kept_start"]
