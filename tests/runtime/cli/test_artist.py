@@ -10,6 +10,7 @@ import pytest
 from svbrdf_cli import conventions as cv
 from svbrdf_cli.imageio import read_image, write_image
 from svbrdf_cli.imageops import blur, luminance
+from svbrdf_cli.shading import normal_to_tilt
 
 from .clitools import ROOT, SAMPLE, run
 
@@ -192,11 +193,6 @@ def test_a_pattern_round_the_flash_spot_does_not_make_a_disc_of_it_with_refine(t
     assert 0.8 <= bright <= 1.25, bright
 
 
-def _tilt(folder):
-    n = cv.decode_normals(read_image(folder / "normal.png"))
-    return n[..., :2] / np.maximum(n[..., 2:], 0.1)
-
-
 def test_refine_draws_no_cross_nor_patch_through_a_real_leathers_highlight(tmp_path, shared_data):
     # an orange leather (henzler_train 0259/IMG_0892) whose normals the chain reads flat: --refine's change of
     # the tilt was 4x as strong along the highlight's row and column as on its diagonals, a cross that
@@ -222,7 +218,8 @@ def _leather_tilt_change(tmp_path, photo):
         code, out = run("capture", photo, "-o", tmp_path / name, "--no-preview", *options)
         assert code == 0, out
     folder = tmp_path / "refined" / photo.stem
-    change = _tilt(folder) - _tilt(tmp_path / "start" / photo.stem)
+    change = (normal_to_tilt(cv.decode_normals(read_image(folder / "normal.png")))
+              - normal_to_tilt(cv.decode_normals(read_image(tmp_path / "start" / photo.stem / "normal.png"))))
     record = json.loads((folder / "material.json").read_text())
     x0, y0, w, h = record["crop"]["box"]
     hx, hy = record["crop"]["highlight"]
